@@ -1,0 +1,71 @@
+"""Evaluates a finished run: python eval.py --gin_configs=... [--run_dir=...]
+
+Renders every test view of every finished round, writes per-image and mean PSNR / SSIM /
+LPIPS (JSON + markdown) into round_<r>/eval/, prints the rounds table and the error
+against run time table, and plots error_vs_time.png in the run directory.
+"""
+import os
+import sys
+
+from renerf_jax import cli, report, rundir
+from renerf_jax.configs import exit_on_error
+from renerf_jax.datasets import load_scene
+from renerf_jax.evaluation import evaluate_test_views
+from renerf_jax.renerf import initial_state, load_round, round_config, round_dir, rounds_table
+
+
+def curve_rows(run_dir, n_rounds):
+  """Cheap-evaluation points of every round: [{'round', 'step', 'time', 'eval_psnr'}]."""
+  rows = []
+  for r in range(n_rounds):
+    for rec in rundir.read_jsonl(os.path.join(round_dir(run_dir, r), 'train', 'log.jsonl')):
+      if 'eval_psnr' in rec:
+        rows.append({'round': r, 'step': rec['step'], 'time': rec['time'],
+                     'eval_psnr': rec['eval_psnr']})
+  return rows
+
+
+@exit_on_error
+def main(argv=None):
+  config, run_dir = cli.setup(argv, __doc__)
+  cli.check_run_dir(config, run_dir, create=False)
+  scene = load_scene(config)
+  state = initial_state(config)
+  metrics = []
+  for r in range(config.num_rounds + 1):
+    rdir = round_dir(run_dir, r)
+    if not rundir.is_done(rdir):
+      print(f'round {r} is not finished in {run_dir}; evaluating rounds 0..{r - 1}',
+            file=sys.stderr)
+      break
+    state = load_round(config, rdir, state)
+    ev = evaluate_test_views(round_config(config, r), scene, state.params,
+                             os.path.join(rdir, 'eval'))
+    saved = state.metrics[-1]
+    metrics.append(dict(ev['mean'], round=r, round_seconds=saved['round_seconds'],
+                        cumulative_seconds=saved['cumulative_seconds']))
+    print(f'round {r}:\n' + open(os.path.join(rdir, 'eval', 'metrics.md')).read())
+  if not metrics:
+    raise SystemExit(f'error: no finished round in {run_dir}')
+  table = rounds_table(metrics)
+  curve = curve_rows(run_dir, len(metrics))
+  report.write_json(os.path.join(run_dir, 'eval_rounds.json'),
+                    {'rounds': metrics, 'error_vs_time': curve})
+  curve_md = report.markdown_table(curve, [('round', 'round'), ('step', 'step'),
+                                           ('time', 'time [s]'), ('eval_psnr', 'test PSNR')])
+  report.write_markdown(os.path.join(run_dir, 'eval_rounds.md'),
+                        table + '\n\nError against run time (cheap test PSNR):\n\n' +
+                        curve_md + '\n')
+  if curve:
+    curves = {}
+    for c in curve:
+      label = 'baseline' if c['round'] == 0 else f"round {c['round']}"
+      curves.setdefault(label, []).append((c['time'], c['eval_psnr']))
+    report.plot_error_vs_time(curves, os.path.join(run_dir, 'error_vs_time.png'),
+                              metric='psnr', title=f'{scene.name}: test PSNR vs time')
+  print(table)
+  print('\nError against run time (cheap test PSNR):\n' + curve_md)
+
+
+if __name__ == '__main__':
+  main()

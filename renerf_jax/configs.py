@@ -1,0 +1,203 @@
+"""Configuration: one frozen, hashable `Config` dataclass set entirely through gin.
+
+The Config is passed as a *static* argument to the jitted steps, so every switch in it
+(a disabled regulariser, NDC on/off, the field backbone) decides at trace time which code
+exists in the compiled step: switched-off work costs nothing.
+"""
+import argparse
+import dataclasses
+import os
+import sys
+from typing import Optional, Sequence, Tuple
+
+import gin
+
+from renerf_jax.errors import ConfigError, USER_ERRORS
+
+
+@gin.configurable()
+@dataclasses.dataclass(frozen=True)
+class Config:
+  """All knobs. Defaults are RegNeRF llff3 values unless a comment says otherwise."""
+  # --- data ---
+  dataset_loader: str = 'llff'  # 'llff', 'blender' or 'procedural' (the embedded scene).
+  data_dir: str = ''  # Folder that holds the scene folders (e.g. .../nerf_llff_data).
+  scene: str = 'fern'  # Scene folder name inside data_dir.
+  factor: int = 8  # LLFF image downsampling factor (reads images_<factor>).
+  n_input_views: int = 3  # Few-shot training views (RegNeRF split).
+  llffhold: int = 8  # Every llffhold-th image is a test view.
+  white_bkgd: bool = False  # Composite on white (Blender).
+  use_ndc: bool = True  # NDC space for forward-facing scenes; never for 360 scenes.
+  near: float = 0.  # Near plane (NDC: 0).
+  far: float = 1.  # Far plane (NDC: 1).
+  procedural_size: Tuple[int, int] = (48, 64)  # (H, W) of the embedded scene.
+  procedural_views: int = 17  # Number of images the embedded scene renders.
+  # --- optimisation ---
+  seed: int = 0
+  max_steps: int = 69768  # RegNeRF llff3: 69768.
+  batch_size: int = 4096  # Rays per step (real/pseudo views).
+  lr_init: float = 2e-3
+  lr_final: float = 2e-5
+  lr_delay_steps: int = 512
+  lr_delay_mult: float = 0.01
+  grad_max_norm: float = 0.1  # Clip by global norm (0: off).
+  grad_max_val: float = 0.1  # Clip by value (0: off).
+  adam_eps: float = 1e-8
+  coarse_loss_mult: float = 0.1
+  # --- model: sampling ---
+  num_samples: int = 128  # Samples per level (coarse and fine).
+  num_levels: int = 2  # Coarse + fine, sharing one field.
+  resample_padding: float = 0.01
+  stop_level_grad: bool = True
+  ray_shape: str = 'cylinder'  # 'cone' or 'cylinder'.
+  lindisp: bool = False
+  randomized: bool = True  # Stratified jitter while training.
+  # --- model: field ---
+  field: str = 'mlp'  # 'mlp' (mip-NeRF MLP) or 'grid' (fast multi-resolution grid).
+  net_depth: int = 8
+  net_width: int = 256
+  skip_layer: int = 4
+  net_depth_viewdirs: int = 1
+  net_width_viewdirs: int = 128
+  min_deg_point: int = 0
+  max_deg_point: int = 16
+  deg_view: int = 4
+  use_viewdirs: bool = True
+  density_bias: float = -1.
+  rgb_padding: float = 0.001
+  density_noise: float = 1.  # Std of noise added to raw density in training only.
+  # --- RegNeRF regularisers (0 / False switches a term off: nothing of it is traced) ---
+  depth_tv_loss_mult: float = 0.1  # Depth-TV weight after the decay (0: off).
+  depth_tv_decay: bool = True  # Log-linear decay from _start to _end over _maxstep.
+  depth_tv_mult_start: float = 400.
+  depth_tv_mult_end: float = 0.1
+  depth_tv_maxstep: int = 512
+  n_random_poses: int = 10000  # Unobserved poses for the depth-TV patches.
+  batch_size_random: int = 4096  # Rays per step from random poses (64 patches of 8x8).
+  patch_size: int = 8
+  random_pose_spread: float = 1.2  # Forward-facing: box of camera centres enlarged by this.
+  anneal_nearfar: bool = True
+  anneal_nearfar_steps: int = 512
+  anneal_nearfar_perc: float = 0.0001
+  anneal_mid_perc: float = 1.0
+  # --- FreeNeRF regularisers (off in llff3.gin, on in llff3_freenerf.gin) ---
+  freq_reg: bool = False  # Open the IPE frequency bands linearly...
+  freq_reg_end: float = 0.9  # ... until this fraction of max_steps.
+  occ_reg_mult: float = 0.  # Occlusion regularisation weight (FreeNeRF: 0.01; 0: off).
+  occ_reg_range: int = 20  # Samples nearest to the camera that are penalised.
+  # --- grid backbone (Config.field = 'grid') ---
+  grid_levels: int = 12  # Resolution levels of the multi-resolution grid.
+  grid_base_res: int = 16  # Coarsest resolution (vertices per axis - 1).
+  grid_max_res: int = 512  # Finest resolution.
+  grid_features: int = 2  # Features per level.
+  grid_log2_hashmap_size: int = 17  # Entries per level when hashed (2^n); dense if smaller.
+  grid_mlp_width: int = 64  # Width of the tiny density / colour MLPs.
+  grid_init_scale: float = 1e-4  # Uniform init range of the tables.
+  # --- Re-Nerfing ---
+  num_rounds: int = 0  # Re-Nerfing rounds after the baseline (0: baseline only).
+  pseudo_frac: float = 0.5  # Fraction of each batch drawn from pseudo-views while on.
+  pseudo_until: int = 5000  # K: pseudo-view rays only for steps < K (RegNeRF: 5000/69768).
+  interp_factors: str = '7x'  # Preset name (2x, 3x, 3x_b, 3x_c, 4x, 5x, 7x, 11x) or
+  # comma-separated factors, e.g. '0.25,0.5'.
+  sequencing: str = 'position'  # Neighbour sequencing: ordered, position or rotation.
+  pseudo_targets: str = 'interp'  # 'interp', 'test' (test poses) or 'interp+test'.
+  # --- Laplace uncertainty (Bayes' Rays style) and masks ---
+  use_masks: bool = False  # Mask uncertain pseudo-view pixels (runs the Hessian pass).
+  deform_log2_res: int = 8  # L: the deformation grid has (2^L + 1)^3 vertices.
+  hessian_rays: int = 65536  # R: training rays in the Hessian pass.
+  hessian_lambda: float = 1e-4  # Prior precision lambda (keeps Sigma finite).
+  mask_keep_frac: float = 0.8  # Keep this fraction of pseudo pixels (mu by bisection)...
+  mask_threshold: float = -1.  # ... unless >= 0: absolute mu on the uncertainty.
+  # --- logging, evaluation, checkpoints ---
+  print_every: int = 100
+  eval_every: int = 500  # Steps between cheap test PSNR evaluations (0: off).
+  eval_n_views: int = 3  # Test views in the cheap evaluation.
+  eval_stride: int = 4  # Pixel stride of the cheap evaluation (1: full images).
+  checkpoint_every: int = 1000
+  render_chunk: int = 4096  # Rays per chunk when rendering full images.
+  lpips_nets: Tuple[str, ...] = ('alex', 'vgg')
+
+  def __post_init__(self):
+    _check(self.dataset_loader in ('llff', 'blender', 'procedural'),
+           f'Config.dataset_loader={self.dataset_loader!r} (llff, blender or procedural)')
+    _check(self.ray_shape in ('cone', 'cylinder'),
+           f'Config.ray_shape={self.ray_shape!r} (cone or cylinder)')
+    _check(self.field in ('mlp', 'grid'), f'Config.field={self.field!r} (mlp or grid)')
+    _check(self.max_steps > 0, f'Config.max_steps={self.max_steps} must be > 0')
+    _check(self.batch_size > 0, f'Config.batch_size={self.batch_size} must be > 0')
+    _check(self.num_samples >= 2, f'Config.num_samples={self.num_samples} must be >= 2')
+    _check(self.num_levels >= 1, f'Config.num_levels={self.num_levels} must be >= 1')
+    _check(self.n_input_views >= 1, f'Config.n_input_views={self.n_input_views} must be >= 1')
+    _check(self.far >= self.near, f'Config.far={self.far} < Config.near={self.near}')
+    _check(self.factor >= 1, f'Config.factor={self.factor} must be >= 1')
+
+
+def _check(cond: bool, msg: str):
+  if not cond:
+    raise ConfigError(msg)
+
+
+def parse_args(argv: Optional[Sequence[str]] = None, description: str = ''):
+  """Parses --gin_configs / --gin_bindings (both repeatable) and other flags.
+
+  Args:
+    argv: command-line arguments without the program name (default sys.argv[1:]).
+    description: help text.
+
+  Returns:
+    argparse.Namespace with gin_configs, gin_bindings, run_dir.
+  """
+  parser = argparse.ArgumentParser(description=description)
+  parser.add_argument('--gin_configs', action='append', default=[],
+                      help='gin config file (repeatable)')
+  parser.add_argument('--gin_bindings', action='append', default=[],
+                      help="gin binding, e.g. \"Config.max_steps=100\" (repeatable)")
+  parser.add_argument('--run_dir', default=None,
+                      help='run directory (default runs/<config name>)')
+  return parser.parse_args(argv)
+
+
+def load_config(gin_configs: Sequence[str] = (), gin_bindings: Sequence[str] = ()) -> Config:
+  """Parses gin files and bindings and returns the Config.
+
+  Args:
+    gin_configs: paths of .gin files.
+    gin_bindings: binding strings.
+
+  Returns:
+    Config.
+
+  Raises:
+    ConfigError: naming the missing file or the bad binding.
+  """
+  for path in gin_configs:
+    if not os.path.isfile(path):
+      raise ConfigError(f'gin config file not found: {path}')
+  gin.clear_config()
+  for path in gin_configs:  # `include 'x.gin'` resolves next to the including file.
+    gin.add_config_file_search_path(os.path.dirname(os.path.abspath(path)))
+  try:
+    gin.parse_config_files_and_bindings(list(gin_configs), list(gin_bindings),
+                                        skip_unknown=False)
+  except (ValueError, KeyError, SyntaxError, TypeError, AttributeError, IOError) as e:
+    first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+    where = ', '.join(list(gin_configs) + [repr(b) for b in gin_bindings])
+    raise ConfigError(f'bad gin configuration ({where}): {first}') from None
+  return Config()
+
+
+def default_run_dir(gin_configs: Sequence[str]) -> str:
+  """runs/<stem of the last gin file>."""
+  stem = os.path.splitext(os.path.basename(gin_configs[-1]))[0] if gin_configs else 'default'
+  return os.path.join('runs', stem)
+
+
+def exit_on_error(fn):
+  """Decorator for CLI mains: known user errors become one line on stderr and exit 2."""
+  def wrapped(*args, **kwargs):
+    try:
+      return fn(*args, **kwargs)
+    except USER_ERRORS as e:
+      print(f'error: {e}', file=sys.stderr)
+      sys.exit(2)
+  return wrapped

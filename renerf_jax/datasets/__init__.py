@@ -1,0 +1,14 @@
+"""Datasets: LLFF, Blender and the embedded procedural scene, behind one `load_scene`."""
+from renerf_jax.datasets.scene import Scene, camera_rays, fewshot_split, ray_pool
+
+
+def load_scene(config) -> Scene:
+  """Loads the scene selected by config.dataset_loader."""
+  if config.dataset_loader == 'llff':
+    from renerf_jax.datasets.llff import load_llff  # pylint: disable=g-import-not-at-top
+    return load_llff(config)
+  if config.dataset_loader == 'blender':
+    from renerf_jax.datasets.blender import load_blender  # pylint: disable=g-import-not-at-top
+    return load_blender(config)
+  from renerf_jax.datasets.procedural import load_procedural  # pylint: disable=g-import-not-at-top
+  return load_procedural(config)

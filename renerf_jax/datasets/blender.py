@@ -1,0 +1,64 @@
+"""NeRF-synthetic (Blender) scenes: transforms_{train,test}.json, RGBA on white."""
+import json
+import os
+
+import numpy as np
+
+from renerf_jax.datasets import images as image_io
+from renerf_jax.datasets.scene import Scene
+from renerf_jax.errors import DataError
+
+
+def read_split(scene_dir, split):
+  """Reads one split's frames. Returns (image paths, c2w [N, 3, 4], camera_angle_x)."""
+  path = os.path.join(scene_dir, f'transforms_{split}.json')
+  if not os.path.isfile(path):
+    raise DataError(f'camera file not found: {path}')
+  try:
+    with open(path) as f:
+      meta = json.load(f)
+    angle = float(meta['camera_angle_x'])
+    frames = meta['frames']
+  except (json.JSONDecodeError, KeyError, TypeError, ValueError) as e:
+    raise DataError(f'malformed {path}: {type(e).__name__}: {e}') from None
+  paths, poses = [], []
+  for frame in frames:
+    img = os.path.join(scene_dir, frame['file_path'])
+    if not os.path.splitext(img)[1]:
+      img += '.png'
+    if not os.path.isfile(img):
+      raise DataError(f'{path}: frame file missing: {img}')
+    c2w = np.asarray(frame['transform_matrix'], np.float64)
+    if c2w.shape != (4, 4) or not np.all(np.isfinite(c2w)):
+      raise DataError(f'{path}: bad transform_matrix for {frame["file_path"]}')
+    paths.append(img)
+    poses.append(c2w[:3, :4])
+  return paths, np.stack(poses), angle
+
+
+def load_blender(config) -> Scene:
+  """Loads a Blender scene: train views (first n_input_views evenly spread if fewer are
+  asked than exist) and test views, RGBA composited on white when config.white_bkgd."""
+  scene_dir = os.path.join(config.data_dir, config.scene)
+  if not os.path.isdir(scene_dir):
+    raise DataError(f'scene folder not found: {scene_dir}')
+  tr_paths, tr_poses, angle = read_split(scene_dir, 'train')
+  te_paths, te_poses, _ = read_split(scene_dir, 'test')
+  if config.n_input_views > len(tr_paths):
+    raise DataError(f'Config.n_input_views={config.n_input_views} but {scene_dir} has '
+                    f'{len(tr_paths)} train views')
+  pick = np.round(np.linspace(0, len(tr_paths) - 1, config.n_input_views)).astype(int)
+  paths = [tr_paths[i] for i in pick] + te_paths
+  rgba = image_io.read_images(paths, keep_alpha=True)
+  rgb, alpha = rgba[..., :3], rgba[..., 3:]
+  images = rgb * alpha + (1. - alpha) if config.white_bkgd else rgb * alpha
+  w = images.shape[2]
+  focal = 0.5 * w / np.tan(0.5 * angle)
+  n_tr = len(pick)
+  poses = np.concatenate([tr_poses[pick], te_poses], 0)
+  return Scene(name=config.scene, images=images.astype(np.float32),
+               poses=poses.astype(np.float32), focal=float(focal), near=config.near,
+               far=config.far, use_ndc=False, white_bkgd=config.white_bkgd,
+               train_idx=np.arange(n_tr), test_idx=np.arange(n_tr, len(paths)),
+               forward_facing=False,
+               bbox=((-1.5, -1.5, -1.5), (1.5, 1.5, 1.5)))

@@ -1,0 +1,97 @@
+"""The Scene container, the RegNeRF few-shot split, and ray pools for training."""
+import dataclasses
+from typing import Optional
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from renerf_jax import cameras
+from renerf_jax.errors import DataError
+
+
+@dataclasses.dataclass(frozen=True)
+class Scene:
+  """A posed image set (host numpy arrays) and the cameras' ray conventions."""
+  name: str
+  images: np.ndarray  # [N, H, W, 3] float32 in [0, 1].
+  poses: np.ndarray  # [N, 3, 4] camera-to-world (OpenGL convention).
+  focal: float  # Pixels.
+  near: float  # Ray near bound (NDC: 0).
+  far: float  # Ray far bound (NDC: 1).
+  use_ndc: bool
+  white_bkgd: bool
+  train_idx: np.ndarray  # [n_train] int.
+  test_idx: np.ndarray  # [n_test] int.
+  depths: Optional[np.ndarray] = None  # [N, H, W] ground-truth z-depth when known.
+  forward_facing: bool = True
+  focus_depth: float = 1.0  # Depth the random forward-facing poses look at.
+  bbox: tuple = ((-1., -1., -1.), (1., 1., 1.))  # Scene box (NDC cube for LLFF).
+
+  @property
+  def height(self) -> int:
+    return int(self.images.shape[1])
+
+  @property
+  def width(self) -> int:
+    return int(self.images.shape[2])
+
+
+def focus_depth_from_bounds(bounds, dt=0.75):
+  """LLFF render-path focus: 1 / ((1 - dt) / close + dt / inf), close = 0.9 min bound,
+  inf = 5 max bound (a depth between the nearest and a far point, weighted to the far)."""
+  close, inf = bounds.min() * .9, bounds.max() * 5.
+  return float(1. / ((1. - dt) / close + dt / inf))
+
+
+def fewshot_split(n_images, n_input_views, llffhold=8):
+  """RegNeRF's LLFF split: test = every llffhold-th image; n train views evenly spread.
+
+  Args:
+    n_images: images in the scene.
+    n_input_views: training views to pick from the non-test images.
+    llffhold: test hold-out period.
+
+  Returns:
+    (train_idx, test_idx) int arrays.
+  """
+  all_idx = np.arange(n_images)
+  test_idx = all_idx[::llffhold]
+  rest = np.array([i for i in all_idx if i not in set(test_idx.tolist())])
+  if n_input_views > len(rest):
+    raise DataError(f'Config.n_input_views={n_input_views} but only {len(rest)} '
+                    f'non-test images are available')
+  pick = np.round(np.linspace(0, len(rest) - 1, n_input_views)).astype(int)
+  return rest[pick], test_idx
+
+
+def camera_rays(scene: Scene, idx, poses=None) -> cameras.Rays:
+  """Rays of full images: [len(idx), H, W] for the scene's cameras (or given poses)."""
+  poses = scene.poses[np.asarray(idx)] if poses is None else poses
+  fn = jax.jit(jax.vmap(lambda c2w: cameras.image_rays(
+      c2w, scene.height, scene.width, scene.focal, scene.use_ndc, scene.near, scene.far)))
+  return fn(jnp.asarray(poses, jnp.float32))
+
+
+def ray_pool(scene: Scene, idx, images=None, masks=None, poses=None):
+  """All rays of the given views flattened into a training pool.
+
+  Args:
+    scene: the Scene.
+    idx: view indices (ignored when `poses` is given).
+    images: optional [V, H, W, 3] images replacing scene.images[idx] (pseudo-views).
+    masks: optional [V, H, W] loss weights in [0, 1] (0: never enters the loss).
+    poses: optional [V, 3, 4] camera poses replacing scene.poses[idx].
+
+  Returns:
+    dict with 'rays' (Rays [P]), 'rgb' [P, 3] and 'lossmult' [P, 1], jnp arrays.
+  """
+  rays = camera_rays(scene, idx, poses)
+  images = scene.images[np.asarray(idx)] if images is None else images
+  rgb = jnp.asarray(images, jnp.float32).reshape(-1, 3)
+  if masks is None:
+    lossmult = jnp.ones((rgb.shape[0], 1), jnp.float32)
+  else:
+    lossmult = jnp.asarray(masks, jnp.float32).reshape(-1, 1)
+  flat = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[3:]), rays)
+  return {'rays': flat, 'rgb': rgb, 'lossmult': lossmult}

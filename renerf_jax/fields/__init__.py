@@ -1,0 +1,29 @@
+"""Field backbones with one interface: (means, covs, viewdirs, feature_mask) -> raw outputs."""
+import jax
+import jax.numpy as jnp
+
+
+def make_field(config):
+  """The flax module selected by `config.field` (built from static config only)."""
+  if config.field == 'mlp':
+    from renerf_jax.fields.mlp import MipMLP  # pylint: disable=g-import-not-at-top
+    return MipMLP(net_depth=config.net_depth, net_width=config.net_width,
+                  skip_layer=config.skip_layer, net_depth_viewdirs=config.net_depth_viewdirs,
+                  net_width_viewdirs=config.net_width_viewdirs,
+                  min_deg_point=config.min_deg_point, max_deg_point=config.max_deg_point,
+                  deg_view=config.deg_view, use_viewdirs=config.use_viewdirs)
+  if config.field == 'grid':
+    from renerf_jax.fields.grid import GridField  # pylint: disable=g-import-not-at-top
+    return GridField(num_levels=config.grid_levels, base_res=config.grid_base_res,
+                     max_res=config.grid_max_res, num_features=config.grid_features,
+                     log2_hashmap_size=config.grid_log2_hashmap_size,
+                     mlp_width=config.grid_mlp_width, init_scale=config.grid_init_scale,
+                     deg_view=config.deg_view, use_viewdirs=config.use_viewdirs)
+  raise ValueError(f'unknown field backbone {config.field!r}')
+
+
+def init_field_params(config, key):
+  """Initial parameters of the configured field."""
+  field = make_field(config)
+  means = jnp.zeros((1, 2, 3))
+  return field.init(key, means, jnp.ones_like(means) * 1e-2, jnp.zeros((1, 3)).at[:, 2].set(-1.))

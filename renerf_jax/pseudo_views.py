@@ -1,0 +1,105 @@
+"""Pseudo-views: model B rendered at poses between neighbouring training cameras."""
+import os
+from typing import Optional
+
+import flax
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from renerf_jax import poses as pose_lib
+from renerf_jax import report
+from renerf_jax.datasets import camera_rays
+from renerf_jax.errors import ConfigError
+from renerf_jax.rendering import render_flat
+
+
+@flax.struct.dataclass
+class PseudoViews:
+  """Synthesised training views (a pytree of arrays)."""
+  images: jnp.ndarray  # [M, H, W, 3] in [0, 1].
+  poses: jnp.ndarray  # [M, 3, 4] camera-to-world.
+  masks: jnp.ndarray  # [M, H, W] 1 = pixel enters the loss, 0 = masked.
+  uncertainty: jnp.ndarray  # [M, H, W] rendered uncertainty (zeros when masks are off).
+
+
+def parse_factors(spec: str):
+  """'7x' (a preset) or '0.25,0.5' -> tuple of interpolation factors in (0, 1)."""
+  try:
+    if spec in pose_lib.AUGMENTATION_PRESETS:
+      return pose_lib.resolve_factors(spec)
+    return pose_lib.resolve_factors([float(v) for v in spec.split(',') if v.strip()])
+  except ValueError as e:
+    raise ConfigError(f'Config.interp_factors={spec!r}: {e}') from None
+
+
+def pseudo_view_poses(config, scene):
+  """Poses of the pseudo-views and a description of each.
+
+  'interp': every factor between every neighbouring pair of training cameras (position
+  lerp, rotation SLERP; pairs from config.sequencing). 'test': the test poses (the
+  paper's "optimising for specific views"). 'interp+test': both.
+
+  Returns:
+    (poses [M, 3, 4] float32, meta: list of dicts).
+  """
+  out, meta = [], []
+  targets = config.pseudo_targets.split('+')
+  for t in targets:
+    if t not in ('interp', 'test'):
+      raise ConfigError(f'Config.pseudo_targets={config.pseudo_targets!r} '
+                        "(interp, test or interp+test)")
+  if 'interp' in targets:
+    train = np.asarray(scene.poses[scene.train_idx], np.float64)
+    if len(train) < 2:
+      raise ConfigError(f'Re-Nerfing needs at least 2 training views to interpolate '
+                        f'pseudo-views, got {len(train)} (Config.n_input_views)')
+    poses, info = pose_lib.interpolated_poses(train, parse_factors(config.interp_factors),
+                                              config.sequencing)
+    out.append(poses)
+    meta += [{'kind': 'interp', 'pair': [int(scene.train_idx[i]) for i in m['pair']],
+              'beta': float(m['beta'])} for m in info]
+  if 'test' in targets:
+    out.append(np.asarray(scene.poses[scene.test_idx], np.float64))
+    meta += [{'kind': 'test', 'view': int(i)} for i in scene.test_idx]
+  return np.concatenate(out, 0).astype(np.float32), meta
+
+
+def render_pseudo_views(config, scene, params, poses, show_progress=True) -> PseudoViews:
+  """Renders model `params` at `poses`; all pixels valid (masks of ones)."""
+  rays = camera_rays(scene, None, poses)
+  m, h, w = rays.origins.shape[:3]
+  flat = jax.tree_util.tree_map(lambda v: v.reshape((m * h * w,) + v.shape[3:]), rays)
+  out = render_flat(config, params, flat, show_progress=show_progress,
+                    desc=f'pseudo-views ({m})')
+  images = np.clip(out['rgb'], 0., 1.).reshape(m, h, w, 3)
+  return PseudoViews(images=images, poses=np.asarray(poses),
+                     masks=np.ones((m, h, w), np.float32),
+                     uncertainty=np.zeros((m, h, w), np.float32))
+
+
+def save_pseudo_views(directory, pv: PseudoViews, meta, save_png=True):
+  """Writes views.npz (atomically) and, per view, rgb / mask / uncertainty PNGs."""
+  os.makedirs(directory, exist_ok=True)
+  arrays = {k: np.asarray(getattr(pv, k)) for k in ('images', 'poses', 'masks',
+                                                     'uncertainty')}
+  with report.atomic_open(os.path.join(directory, 'views.npz'), 'wb') as f:
+    np.savez_compressed(f, **arrays)
+  report.write_json(os.path.join(directory, 'views.json'), meta)
+  if save_png:
+    for i in range(arrays['images'].shape[0]):
+      report.save_image_png(os.path.join(directory, f'view_{i:03d}.png'),
+                            arrays['images'][i])
+      report.save_image_png(os.path.join(directory, f'mask_{i:03d}.png'),
+                            arrays['masks'][i])
+      if np.any(arrays['uncertainty'][i]):
+        report.save_image_png(os.path.join(directory, f'uncertainty_{i:03d}.png'),
+                              report.colorize(arrays['uncertainty'][i]))
+
+
+def load_pseudo_views(directory) -> Optional[PseudoViews]:
+  path = os.path.join(directory, 'views.npz')
+  if not os.path.isfile(path):
+    return None
+  with np.load(path) as z:
+    return PseudoViews(**{k: z[k] for k in ('images', 'poses', 'masks', 'uncertainty')})

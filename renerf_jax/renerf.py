@@ -1,0 +1,190 @@
+"""Re-Nerfing rounds on immutable state: RoundState -> RoundState (the paper's Figure 2).
+
+  round 0: train B on the real views                         (the baseline)
+  round r: render pseudo-views with B at interpolated poses
+           [Laplace uncertainty of B -> masks]               (only with Config.use_masks)
+           train D from scratch on real + masked pseudo-views (pseudo rays until step K)
+           D becomes the next round's B
+
+Each round writes round_<r>/ in the run directory and marks it DONE; a rerun of the same
+command reloads finished rounds (never rewriting them) and resumes the interrupted one
+from its last atomic checkpoint.
+"""
+import dataclasses
+import os
+import time
+from typing import Any, Optional, Tuple
+
+import flax
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import serialization
+
+from renerf_jax import poses as pose_lib
+from renerf_jax import report, rundir, training
+from renerf_jax.datasets import camera_rays, ray_pool
+from renerf_jax.evaluation import cheap_eval_fn, evaluate_test_views
+from renerf_jax.pseudo_views import (PseudoViews, load_pseudo_views, pseudo_view_poses,
+                                     render_pseudo_views, save_pseudo_views)
+
+
+@flax.struct.dataclass
+class RoundState:
+  """Everything one round hands to the next (a pytree)."""
+  round_index: jnp.ndarray  # int32 scalar: round that produced `params` (-1: none yet).
+  params: Any  # Field parameters of the current model (B for the next round).
+  pseudo: Optional[PseudoViews]  # Pseudo-views the current model was trained with.
+  metrics: Tuple[dict, ...]  # Test metrics of every finished round, in order.
+  seconds: jnp.ndarray  # Cumulative wall-clock seconds (training + synthesis + masks).
+  rng: jnp.ndarray  # PRNG key for the next round.
+
+
+def initial_state(config) -> RoundState:
+  return RoundState(round_index=jnp.asarray(-1, jnp.int32), params=None, pseudo=None,
+                    metrics=(), seconds=jnp.asarray(0., jnp.float32),
+                    rng=jax.random.PRNGKey(config.seed))
+
+
+def round_dir(run_dir, r):
+  return os.path.join(run_dir, f'round_{r}')
+
+
+def regularizer_poses(config, scene):
+  """Random unobserved poses for depth TV ([n_random_poses, 3, 4]), or None when off."""
+  if config.depth_tv_loss_mult <= 0:
+    return None
+  rng = np.random.default_rng(config.seed)
+  train = np.asarray(scene.poses[scene.train_idx], np.float64)
+  if scene.forward_facing:
+    poses = pose_lib.random_poses_forward_facing(train, config.n_random_poses, rng,
+                                                 focus_depth=scene.focus_depth,
+                                                 spread=config.random_pose_spread)
+  else:
+    poses = pose_lib.random_poses_sphere(train, config.n_random_poses, rng)
+  return jnp.asarray(poses, jnp.float32)
+
+
+def make_pools(config, scene, pseudo: Optional[PseudoViews]):
+  """Training pools: real views, pseudo-views (if any), random poses (if depth TV)."""
+  pools = {'real': ray_pool(scene, scene.train_idx)}
+  if pseudo is not None:
+    pools['pseudo'] = ray_pool(scene, None, images=pseudo.images, masks=pseudo.masks,
+                               poses=pseudo.poses)
+  random_poses = regularizer_poses(config, scene)
+  if random_poses is not None:
+    pools['random_poses'] = random_poses
+  return pools
+
+
+def synthesize(config, scene, params, out_dir, show_progress=True):
+  """Pseudo-views of model `params` (with uncertainty masks if config.use_masks).
+
+  Cached in out_dir (views.npz written atomically), so a resumed round reuses them.
+
+  Returns:
+    (PseudoViews, seconds spent).
+  """
+  cached = load_pseudo_views(out_dir)
+  info_path = os.path.join(out_dir, 'timing.json')
+  if cached is not None and os.path.isfile(info_path):
+    return cached, float(report.read_json(info_path)['seconds'])
+  t0 = time.perf_counter()
+  poses, meta = pseudo_view_poses(config, scene)
+  pv = render_pseudo_views(config, scene, params, poses, show_progress)
+  timing = {'render_seconds': time.perf_counter() - t0}
+  if config.use_masks:
+    t1 = time.perf_counter()
+    pv, mu = mask_pseudo_views(config, scene, params, pv)
+    timing.update(uncertainty_seconds=time.perf_counter() - t1, mu=float(mu),
+                  kept_fraction=float(np.mean(pv.masks)))
+  timing['seconds'] = time.perf_counter() - t0
+  save_pseudo_views(out_dir, pv, meta)
+  report.write_json(info_path, timing)
+  return pv, timing['seconds']
+
+
+def mask_pseudo_views(config, scene, params, pv: PseudoViews):
+  """Adds Laplace-uncertainty masks to pseudo-views (pixels with U > mu masked).
+
+  Returns:
+    (PseudoViews with masks and uncertainty, mu).
+  """
+  from renerf_jax import uncertainty  # pylint: disable=g-import-not-at-top
+  lo, hi = scene.bbox
+  u, mask, mu = uncertainty.compute_masks(
+      config, params, ray_pool(scene, scene.train_idx)['rays'],
+      camera_rays(scene, None, pv.poses), np.asarray(lo), np.asarray(hi))
+  return pv.replace(masks=np.asarray(mask, np.float32),
+                    uncertainty=np.asarray(u, np.float32)), mu
+
+
+def round_config(config, r):
+  """The Config of round r's training: a fresh seed per round (D starts from scratch)."""
+  return dataclasses.replace(config, seed=config.seed + 1000 * r)
+
+
+def round_step(config, scene, state: RoundState, run_dir, show_progress=True) -> RoundState:
+  """Runs the next round and returns the next RoundState (a finished round is loaded)."""
+  r = int(state.round_index) + 1
+  rdir = round_dir(run_dir, r)
+  if rundir.is_done(rdir):
+    return load_round(config, rdir, state)
+  cfg = round_config(config, r)
+  pseudo, synth_seconds = None, 0.
+  if r > 0:
+    pseudo, synth_seconds = synthesize(config, scene, state.params,
+                                       os.path.join(rdir, 'pseudo_views'), show_progress)
+  start = float(state.seconds) + synth_seconds
+  result = training.train_model(
+      cfg, scene, os.path.join(rdir, 'train'), make_pools(cfg, scene, pseudo),
+      pseudo_until=config.pseudo_until if pseudo is not None else 0,
+      eval_fn=cheap_eval_fn(cfg, scene), time_offset=start,
+      desc=f'round {r}' if r else 'baseline', show_progress=show_progress)
+  seconds = start + result.train_seconds
+  ev = evaluate_test_views(cfg, scene, result.state.params, os.path.join(rdir, 'eval'),
+                           show_progress=False)
+  metrics = dict(ev['mean'], round=r, round_seconds=synth_seconds + result.train_seconds,
+                 cumulative_seconds=seconds, nan_skips=int(result.state.nan_skips))
+  with report.atomic_open(os.path.join(rdir, 'params.msgpack'), 'wb') as f:
+    f.write(serialization.to_bytes(result.state.params))
+  report.write_json(os.path.join(rdir, 'result.json'), {'metrics': metrics,
+                                                        'curve': result.curve})
+  rundir.mark_done(rdir, {'round': r})
+  return RoundState(round_index=jnp.asarray(r, jnp.int32), params=result.state.params,
+                    pseudo=pseudo, metrics=state.metrics + (metrics,),
+                    seconds=jnp.asarray(seconds, jnp.float32),
+                    rng=jax.random.fold_in(state.rng, r))
+
+
+def load_round(config, rdir, state: RoundState) -> RoundState:
+  """The RoundState after the finished round in rdir (read-only)."""
+  r = int(state.round_index) + 1
+  template = training.init_state(round_config(config, r), jax.random.PRNGKey(0)).params
+  with open(os.path.join(rdir, 'params.msgpack'), 'rb') as f:
+    params = serialization.from_bytes(template, f.read())
+  metrics = report.read_json(os.path.join(rdir, 'result.json'))['metrics']
+  return RoundState(round_index=jnp.asarray(r, jnp.int32), params=params,
+                    pseudo=load_pseudo_views(os.path.join(rdir, 'pseudo_views')),
+                    metrics=state.metrics + (metrics,),
+                    seconds=jnp.asarray(metrics['cumulative_seconds'], jnp.float32),
+                    rng=jax.random.fold_in(state.rng, r))
+
+
+def run_rounds(config, scene, run_dir, show_progress=True) -> RoundState:
+  """Baseline plus config.num_rounds Re-Nerfing rounds: the loop of Figure 2."""
+  state = initial_state(config)
+  for _ in range(config.num_rounds + 1):
+    state = round_step(config, scene, state, run_dir, show_progress)
+  return state
+
+
+def rounds_table(metrics):
+  """Markdown table of per-round test metrics in the shape of the paper's 3-view table."""
+  rows = [dict(m, name='baseline' if m['round'] == 0 else f"Re-Nerfing R{m['round']}")
+          for m in metrics]
+  cols = [('name', 'round'), ('psnr', 'PSNR'), ('ssim', 'SSIM'),
+          ('lpips_alex', 'LPIPS-alex'), ('lpips_vgg', 'LPIPS-vgg'), ('avg_err', 'avg err'),
+          ('cumulative_seconds', 'cum. time [s]')]
+  return report.markdown_table(rows, [c for c in cols if c[0] == 'name' or
+                                      any(c[0] in m for m in metrics)])

@@ -1,0 +1,90 @@
+"""Run directories: atomic checkpoints, resume, JSONL logs. Side effects live here."""
+import glob
+import json
+import os
+import re
+
+from flax import serialization
+
+from renerf_jax import report
+
+_CKPT = re.compile(r'checkpoint_(\d+)\.msgpack$')
+
+
+def checkpoint_path(directory, step):
+  return os.path.join(directory, f'checkpoint_{step:08d}.msgpack')
+
+
+def save_checkpoint(directory, target, step, keep=2):
+  """Writes a pytree atomically (temp file + fsync + rename) and keeps the last `keep`.
+
+  A crash at any moment leaves either the previous checkpoints or the new one complete,
+  never a truncated file under a checkpoint name.
+  """
+  os.makedirs(directory, exist_ok=True)
+  data = serialization.to_bytes(target)
+  with report.atomic_open(checkpoint_path(directory, step), 'wb') as f:
+    f.write(data)
+  for old in list_checkpoints(directory)[:-keep]:
+    os.remove(old[1])
+
+
+def list_checkpoints(directory):
+  """[(step, path)] of complete checkpoints, sorted by step."""
+  out = []
+  for path in glob.glob(os.path.join(directory, 'checkpoint_*.msgpack')):
+    m = _CKPT.search(path)
+    if m:
+      out.append((int(m.group(1)), path))
+  return sorted(out)
+
+
+def restore_checkpoint(directory, template):
+  """The latest checkpoint restored into `template`'s structure, or None."""
+  ckpts = list_checkpoints(directory)
+  if not ckpts:
+    return None
+  with open(ckpts[-1][1], 'rb') as f:
+    return serialization.from_bytes(template, f.read())
+
+
+def append_jsonl(path, record):
+  """Appends one JSON line (flushed + fsynced)."""
+  os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+  with open(path, 'a') as f:
+    f.write(json.dumps(report.to_jsonable(record)) + '\n')
+    f.flush()
+    os.fsync(f.fileno())
+
+
+def read_jsonl(path, max_step=None):
+  """Records of a JSONL log (skipping a torn last line); only step <= max_step if given."""
+  if not os.path.isfile(path):
+    return []
+  out = []
+  with open(path) as f:
+    for line in f:
+      try:
+        rec = json.loads(line)
+      except json.JSONDecodeError:
+        continue
+      if max_step is None or rec.get('step', 0) <= max_step:
+        out.append(rec)
+  return out
+
+
+def truncate_jsonl(path, max_step):
+  """Drops log records after max_step (they belong to steps lost by a crash)."""
+  if os.path.isfile(path):
+    recs = read_jsonl(path, max_step)
+    with report.atomic_open(path, 'w') as f:
+      for rec in recs:
+        f.write(json.dumps(rec) + '\n')
+
+
+def is_done(directory):
+  return os.path.isfile(os.path.join(directory, 'DONE'))
+
+
+def mark_done(directory, info=None):
+  report.write_json(os.path.join(directory, 'DONE'), info or {})

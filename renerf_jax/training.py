@@ -1,0 +1,319 @@
+"""Training one model: TrainState, RegNeRF's lr schedule, the jitted step, the loop.
+
+The step is a pure function `train_step(config, cam, n_pseudo, state, pools, key)`
+jitted with (config, cam, n_pseudo) static: regularisers a config switches off, and the
+pseudo-view pool once it is dropped, are not traced at all.
+"""
+import dataclasses
+import functools
+import os
+import time
+from typing import Any, Optional
+
+import flax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+from renerf_jax import cameras, metrics, mip, regularizers, rundir
+from renerf_jax.fields import init_field_params
+from renerf_jax.model import render_rays
+from renerf_jax.progress import progress_bar
+
+
+@flax.struct.dataclass
+class TrainState:
+  step: jnp.ndarray  # int32 scalar: optimisation steps taken.
+  params: Any
+  opt_state: Any
+  nan_skips: jnp.ndarray  # int32 scalar: steps skipped for a non-finite loss/gradient.
+
+
+@dataclasses.dataclass(frozen=True)
+class Camera:
+  """Static pinhole camera of a scene (shared by all its views)."""
+  h: int
+  w: int
+  focal: float
+  use_ndc: bool
+  near: float
+  far: float
+
+  @classmethod
+  def of(cls, scene):
+    return cls(scene.height, scene.width, float(scene.focal), bool(scene.use_ndc),
+               float(scene.near), float(scene.far))
+
+
+def learning_rate(step, config):
+  """RegNeRF / mip-NeRF schedule: log-linear lr_init -> lr_final over max_steps, times a
+  delayed warm-up lr_delay_mult + (1 - lr_delay_mult) sin(pi/2 clip(step / delay, 0, 1))."""
+  if config.lr_delay_steps > 0:
+    delay = config.lr_delay_mult + (1. - config.lr_delay_mult) * jnp.sin(
+        0.5 * jnp.pi * jnp.clip(step / config.lr_delay_steps, 0., 1.))
+  else:
+    delay = 1.
+  return delay * regularizers.log_lerp(step, config.lr_init, config.lr_final,
+                                       config.max_steps)
+
+
+def make_optimizer(config):
+  """Clip by value, clip by global norm, Adam, RegNeRF's schedule."""
+  parts = []
+  if config.grad_max_val > 0:
+    parts.append(optax.clip(config.grad_max_val))
+  if config.grad_max_norm > 0:
+    parts.append(optax.clip_by_global_norm(config.grad_max_norm))
+  parts.append(optax.adam(functools.partial(learning_rate, config=config),
+                          eps=config.adam_eps))
+  return optax.chain(*parts)
+
+
+def init_state(config, key, params=None) -> TrainState:
+  """A fresh TrainState (new parameters unless `params` is given)."""
+  if params is None:
+    params = init_field_params(config, key)
+  opt_state = make_optimizer(config).init(params)
+  return TrainState(step=jnp.zeros((), jnp.int32), params=params, opt_state=opt_state,
+                    nan_skips=jnp.zeros((), jnp.int32))
+
+
+def data_sharding():
+  """Batch sharding over all local devices (data parallel; one device works too)."""
+  mesh = Mesh(np.array(jax.devices()), ('data',))
+  return NamedSharding(mesh, PartitionSpec('data'))
+
+
+def sample_from_pool(pool, key, n):
+  """n rays drawn uniformly with replacement from a pool {'rays', 'rgb', 'lossmult'}."""
+  n_pool = pool['rgb'].shape[0]
+  idx = jax.random.randint(key, (n,), 0, n_pool)
+  return jax.tree_util.tree_map(lambda x: x[idx], pool)
+
+
+def random_patch_rays(poses, key, n_patches, patch, cam: Camera) -> cameras.Rays:
+  """Rays of n_patches patch x patch pixel patches at random pixels of random poses.
+
+  Args:
+    poses: [P, 3, 4] candidate camera poses. key: PRNG key.
+    n_patches, patch: static sizes. cam: static camera.
+
+  Returns:
+    Rays with leading shape [n_patches, patch, patch].
+  """
+  k_pose, k_x, k_y = jax.random.split(key, 3)
+  pose_idx = jax.random.randint(k_pose, (n_patches,), 0, poses.shape[0])
+  x0 = jax.random.randint(k_x, (n_patches, 1, 1), 0, cam.w - patch + 1)
+  y0 = jax.random.randint(k_y, (n_patches, 1, 1), 0, cam.h - patch + 1)
+  grid_y, grid_x = jnp.meshgrid(jnp.arange(patch), jnp.arange(patch), indexing='ij')
+  pix_x = (x0 + grid_x).astype(jnp.float32)
+  pix_y = (y0 + grid_y).astype(jnp.float32)
+  c2w = poses[pose_idx][:, None, None]
+  return cameras.pixel_rays(c2w, pix_x, pix_y, cam.focal, cam.h, cam.w, cam.use_ndc,
+                            cam.near, cam.far)
+
+
+def masked_mse(rgb, gt, lossmult):
+  """sum(m (rgb - gt)^2) / (3 sum(m)); an all-masked batch gives 0 (finite), not NaN."""
+  num = jnp.sum(lossmult * (rgb - gt)**2)
+  den = 3. * jnp.sum(lossmult)
+  return num / jnp.maximum(den, 1e-8)
+
+
+def _anneal(rays, step, config):
+  near, far = regularizers.annealed_near_far(step, rays.near, rays.far,
+                                             config.anneal_nearfar_steps,
+                                             config.anneal_nearfar_perc,
+                                             config.anneal_mid_perc)
+  return rays.replace(near=near, far=far)
+
+
+def _feature_mask(step, config):
+  if not config.freq_reg:
+    return None
+  frac = step / (config.freq_reg_end * config.max_steps)
+  return mip.ipe_feature_mask(
+      mip.freq_band_mask(config.max_deg_point - config.min_deg_point, frac))
+
+
+def loss_fn(params, config, cam, batch, patches, step, key):
+  """Total loss and statistics for one batch.
+
+  Args:
+    params: field parameters. config, cam: static.
+    batch: {'rays' Rays [B], 'rgb' [B, 3], 'lossmult' [B, 1]}.
+    patches: Rays [P, ps, ps] from random poses, or None (depth TV off).
+    step: scalar step. key: PRNG key.
+
+  Returns:
+    (loss, stats dict).
+  """
+  k_main, k_patch = jax.random.split(key)
+  feature_mask = _feature_mask(step, config)
+  rays = _anneal(batch['rays'], step, config) if config.anneal_nearfar else batch['rays']
+  levels = render_rays(config, params, rays, k_main, train=True, feature_mask=feature_mask)
+  mses = [masked_mse(lv['rgb'], batch['rgb'], batch['lossmult']) for lv in levels]
+  loss = mses[-1] + config.coarse_loss_mult * sum(mses[:-1])
+  stats = {'mse': mses[-1], 'psnr': metrics.mse_to_psnr(mses[-1])}
+  if patches is not None:
+    flat = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[3:]), patches)
+    if config.anneal_nearfar:
+      flat = _anneal(flat, step, config)
+    p_levels = render_rays(config, params, flat, k_patch, train=True,
+                           feature_mask=feature_mask)
+    depth = p_levels[-1]['distance'].reshape(patches.origins.shape[:3])
+    tv = regularizers.depth_tv(depth)
+    if config.depth_tv_decay:
+      weight = regularizers.depth_tv_weight(step, config.depth_tv_mult_start,
+                                            config.depth_tv_mult_end,
+                                            config.depth_tv_maxstep)
+    else:
+      weight = config.depth_tv_loss_mult
+    loss = loss + weight * tv
+    stats.update(depth_tv=tv, depth_tv_weight=weight)
+  if config.occ_reg_mult > 0:
+    occ = sum(regularizers.occlusion_loss(lv['density'], config.occ_reg_range)
+              for lv in levels)
+    loss = loss + config.occ_reg_mult * occ
+    stats['occ'] = occ
+  stats['loss'] = loss
+  return loss, stats
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2), donate_argnums=(3,))
+def train_step(config, cam: Camera, n_pseudo: int, state: TrainState, pools, key):
+  """One optimisation step.
+
+  Args:
+    config: static Config. cam: static Camera.
+    n_pseudo: static number of rays drawn from pools['pseudo'] (0: no pseudo-views; the
+      rest of config.batch_size comes from pools['real']).
+    state: TrainState.
+    pools: {'real': pool, optionally 'pseudo': pool, 'random_poses': [P, 3, 4]}.
+    key: PRNG key of this step.
+
+  Returns:
+    (new state, stats). A non-finite loss or gradient leaves params and optimizer state
+    unchanged and increments state.nan_skips.
+  """
+  k_real, k_pseudo, k_patch, k_render = jax.random.split(key, 4)
+  batch = sample_from_pool(pools['real'], k_real, config.batch_size - n_pseudo)
+  if n_pseudo > 0:
+    pseudo = sample_from_pool(pools['pseudo'], k_pseudo, n_pseudo)
+    batch = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), batch, pseudo)
+  batch = jax.lax.with_sharding_constraint(batch, data_sharding())
+  patches = None
+  if config.depth_tv_loss_mult > 0:
+    n_patches = max(config.batch_size_random // config.patch_size**2, 1)
+    patches = random_patch_rays(pools['random_poses'], k_patch, n_patches,
+                                config.patch_size, cam)
+  step = state.step.astype(jnp.float32)
+  (_, stats), grads = jax.value_and_grad(loss_fn, has_aux=True)(
+      state.params, config, cam, batch, patches, step, k_render)
+  finite = jnp.isfinite(stats['loss']) & jnp.all(jnp.array(
+      [jnp.all(jnp.isfinite(g)) for g in jax.tree_util.tree_leaves(grads)]))
+  updates, new_opt = make_optimizer(config).update(grads, state.opt_state, state.params)
+  new_params = optax.apply_updates(state.params, updates)
+  keep = lambda new, old: jnp.where(finite, new, old)
+  stats.update(lr=learning_rate(step, config), grad_norm=jnp.sqrt(sum(jnp.sum(g**2) for g in jax.tree_util.tree_leaves(grads))),
+               finite=finite)
+  return TrainState(step=state.step + 1,
+                    params=jax.tree_util.tree_map(keep, new_params, state.params),
+                    opt_state=jax.tree_util.tree_map(keep, new_opt, state.opt_state),
+                    nan_skips=state.nan_skips + jnp.where(finite, 0, 1)), stats
+
+
+@dataclasses.dataclass
+class TrainResult:
+  state: TrainState
+  train_seconds: float  # Wall time spent in optimisation (evaluation excluded).
+  curve: list  # [{'step', 'train_seconds', 'eval_psnr'}] cheap test evaluations.
+
+
+def _meta_template():
+  return {'train_seconds': np.zeros((), np.float64)}
+
+
+def train_model(config, scene, out_dir, pools, pseudo_until: int = 0,
+                eval_fn=None, time_offset: float = 0., desc: str = 'train',
+                show_progress: bool = True) -> TrainResult:
+  """Trains a fresh model (or resumes the one in out_dir) for config.max_steps steps.
+
+  Args:
+    config: Config. scene: Scene (for its camera).
+    out_dir: directory of checkpoints and log.jsonl (resumed when checkpoints exist).
+    pools: {'real', optionally 'pseudo', 'random_poses'} (see train_step).
+    pseudo_until: pseudo-view rays are sampled for steps < pseudo_until, then removed.
+    eval_fn: optional params -> test PSNR (cheap), called every config.eval_every steps.
+    time_offset: seconds added to logged times (cumulative time over rounds).
+    desc: progress-bar label. show_progress: draw the bar.
+
+  Returns:
+    TrainResult.
+  """
+  cam = Camera.of(scene)
+  n_dev = jax.local_device_count()
+  if config.batch_size % n_dev:
+    raise ValueError(f'Config.batch_size={config.batch_size} is not divisible by the '
+                     f'{n_dev} devices')
+  n_pseudo_on = 0
+  if 'pseudo' in pools and pseudo_until > 0:
+    n_pseudo_on = int(round(config.pseudo_frac * config.batch_size))
+    n_pseudo_on -= n_pseudo_on % n_dev
+  base_key = jax.random.PRNGKey(config.seed)
+  k_init, base_key = jax.random.split(base_key)
+  ckpt_dir = os.path.join(out_dir, 'checkpoints')
+  log_path = os.path.join(out_dir, 'log.jsonl')
+  template = {'state': init_state(config, k_init), 'meta': _meta_template()}
+  restored = rundir.restore_checkpoint(ckpt_dir, template)
+  if restored is None:
+    state, train_seconds = template['state'], 0.
+    if os.path.exists(log_path):
+      os.remove(log_path)
+  else:
+    state, train_seconds = restored['state'], float(restored['meta']['train_seconds'])
+    rundir.truncate_jsonl(log_path, int(state.step))
+  start = int(state.step)
+  curve = [r for r in rundir.read_jsonl(log_path) if 'eval_psnr' in r]
+  bar = progress_bar(total=config.max_steps, initial=start, desc=desc,
+                     disable=not show_progress)
+  t_last = time.perf_counter()
+
+  def save(state, secs):
+    rundir.save_checkpoint(ckpt_dir, {'state': state, 'meta': {
+        'train_seconds': np.asarray(secs, np.float64)}}, int(state.step))
+
+  for step in range(start, config.max_steps):
+    n_pseudo = n_pseudo_on if step < pseudo_until else 0
+    state, stats = train_step(config, cam, n_pseudo, state, pools,
+                              jax.random.fold_in(base_key, step))
+    done = step + 1
+    bar.update(1)
+    log_now = done % config.print_every == 0 or done == config.max_steps
+    eval_now = eval_fn is not None and config.eval_every > 0 and (
+        done % config.eval_every == 0 or done == config.max_steps)
+    ckpt_now = done % config.checkpoint_every == 0 or done == config.max_steps
+    if log_now or eval_now or ckpt_now:
+      stats = jax.device_get(stats)
+      now = time.perf_counter()
+      train_seconds += now - t_last
+      rec = {'step': done, 'train_seconds': train_seconds,
+             'time': time_offset + train_seconds, 'loss': float(stats['loss']),
+             'psnr': float(stats['psnr']), 'lr': float(stats['lr']),
+             'nan_skips': int(state.nan_skips), 'pseudo_rays': n_pseudo}
+      for k in ('depth_tv', 'depth_tv_weight', 'occ'):
+        if k in stats:
+          rec[k] = float(stats[k])
+      if eval_now:
+        rec['eval_psnr'] = float(eval_fn(state.params))
+        curve.append(rec)
+      bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}",
+                      **({'test': f"{rec['eval_psnr']:.2f}"} if eval_now else {}))
+      rundir.append_jsonl(log_path, rec)
+      if ckpt_now:
+        save(state, train_seconds)
+      t_last = time.perf_counter()
+  bar.close()
+  return TrainResult(state=state, train_seconds=train_seconds, curve=curve)

@@ -1,0 +1,39 @@
+"""Shared test fixtures: paths of the real scenes in ../shared/data (read-only)."""
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / 'shared' / 'data'
+LLFF_DIR = DATA / 'nerf_llff_data'
+BLENDER_DIR = DATA / 'nerf_synthetic_200'
+
+
+@pytest.fixture(scope='session')
+def fern_dir():
+  assert (LLFF_DIR / 'fern' / 'poses_bounds.npy').is_file(), f'missing {LLFF_DIR}/fern'
+  return str(LLFF_DIR)
+
+
+@pytest.fixture(scope='session')
+def blender_dir():
+  assert (BLENDER_DIR / 'lego' / 'transforms_train.json').is_file()
+  return str(BLENDER_DIR)
+
+
+def tiny_config(**kw):
+  """A small, fast Config on the embedded procedural scene."""
+  from renerf_jax.configs import Config  # pylint: disable=g-import-not-at-top
+  base = dict(dataset_loader='procedural', procedural_size=(24, 32), max_steps=20,
+              batch_size=64, num_samples=8, net_depth=2, net_width=32, skip_layer=1,
+              net_width_viewdirs=16, max_deg_point=4, deg_view=2, lr_delay_steps=5,
+              depth_tv_maxstep=5, anneal_nearfar_steps=5, n_random_poses=50,
+              batch_size_random=64, patch_size=4, print_every=10, eval_every=10,
+              checkpoint_every=10, render_chunk=512, pseudo_until=10,
+              lpips_nets=('alex',))
+  base.update(kw)
+  return Config(**base)
+
+
+os.environ.setdefault('TF_CPP_MIN_LOG_LEVEL', '2')

@@ -1,0 +1,54 @@
+import glob
+import os
+
+import pytest
+
+from renerf_jax.configs import Config, load_config
+from renerf_jax.errors import ConfigError
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.mark.parametrize('path', sorted(glob.glob(os.path.join(REPO, 'gin_configs', '*.gin'))))
+def test_every_gin_config_parses(path):
+  config = load_config([path])
+  assert isinstance(config, Config)
+
+
+def test_llff3_has_regnerf_values():
+  c = load_config([os.path.join(REPO, 'gin_configs', 'llff3.gin')])
+  assert (c.factor, c.n_input_views, c.max_steps, c.batch_size, c.num_samples) == (
+      8, 3, 69768, 4096, 128)
+  assert (c.lr_init, c.lr_final, c.lr_delay_steps, c.lr_delay_mult) == (2e-3, 2e-5, 512, .01)
+  assert (c.grad_max_norm, c.grad_max_val, c.coarse_loss_mult) == (0.1, 0.1, 0.1)
+  assert c.use_ndc and c.ray_shape == 'cylinder' and c.density_noise == 1.
+  assert (c.net_depth, c.net_width, c.skip_layer, c.net_width_viewdirs, c.deg_view) == (
+      8, 256, 4, 128, 4)
+  assert (c.depth_tv_mult_start, c.depth_tv_mult_end, c.depth_tv_maxstep) == (400., .1, 512)
+  assert (c.anneal_nearfar_steps, c.anneal_nearfar_perc, c.anneal_mid_perc) == (512, 1e-4, 1.)
+  assert (c.n_random_poses, c.batch_size_random, c.patch_size) == (10000, 4096, 8)
+  assert not c.freq_reg and c.occ_reg_mult == 0.
+
+
+def test_small_configs_change_sizes_not_code_paths():
+  base = load_config([os.path.join(REPO, 'gin_configs', 'llff3.gin')])
+  for name in ('llff3_cpu.gin', 'demo.gin'):
+    c = load_config([os.path.join(REPO, 'gin_configs', name)])
+    for field in ('use_ndc', 'ray_shape', 'num_levels', 'anneal_nearfar', 'depth_tv_decay',
+                  'field', 'use_viewdirs', 'freq_reg', 'stop_level_grad'):
+      assert getattr(c, field) == getattr(base, field), (name, field)
+
+
+def test_unknown_binding_is_one_clear_error():
+  with pytest.raises(ConfigError, match='Config.no_such_knob'):
+    load_config([], ['Config.no_such_knob = 3'])
+
+
+def test_missing_config_file():
+  with pytest.raises(ConfigError, match='nope.gin'):
+    load_config(['nope.gin'])
+
+
+def test_bad_value_names_the_field():
+  with pytest.raises(ConfigError, match='ray_shape'):
+    load_config([], ["Config.ray_shape = 'sphere'"])

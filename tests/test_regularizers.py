@@ -1,0 +1,87 @@
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from renerf_jax import regularizers, training
+from renerf_jax.datasets import load_scene, ray_pool
+from renerf_jax.renerf import regularizer_poses
+from conftest import tiny_config
+
+
+@pytest.mark.parametrize('step,expected', [(0, (0.9999, 1.)), (256, (0.5, 1.)),
+                                           (512, (0., 1.)), (10000, (0., 1.))])
+def test_annealed_interval_ndc(step, expected):
+  near, far = regularizers.annealed_near_far(step, jnp.zeros(1), jnp.ones(1), 512, 1e-4, 1.)
+  np.testing.assert_allclose([near[0], far[0]], expected, atol=1e-6)
+
+
+def test_annealed_interval_with_mid_point():
+  # mid = 2 + 0.5 * (6 - 2) = 4; at step 256 (w = 0.5): [3, 5].
+  near, far = regularizers.annealed_near_far(256, jnp.array([2.]), jnp.array([6.]), 512,
+                                             1e-4, 0.5)
+  np.testing.assert_allclose([near[0], far[0]], [3., 5.], rtol=1e-6)
+
+
+def test_depth_tv_weight_schedule():
+  w = lambda s: float(regularizers.depth_tv_weight(s, 400., 0.1, 512))
+  assert w(0) == pytest.approx(400., rel=1e-5)
+  assert w(256) == pytest.approx(np.sqrt(400. * 0.1), rel=1e-5)  # log-linear midpoint
+  assert w(512) == pytest.approx(0.1, rel=1e-5)
+  assert w(60000) == pytest.approx(0.1, rel=1e-5)
+
+
+def test_depth_tv_constant_and_ramp():
+  assert float(regularizers.depth_tv(jnp.full((3, 8, 8), 0.7))) == 0.
+  ramp = jnp.broadcast_to(0.1 * jnp.arange(8.), (2, 8, 8))  # slope 0.1 along x only
+  assert float(regularizers.depth_tv(ramp)) == pytest.approx(0.01, rel=1e-5)
+  assert float(regularizers.depth_tv(jnp.swapaxes(ramp, 1, 2))) == pytest.approx(0.01,
+                                                                                 rel=1e-5)
+
+
+def test_occlusion_loss_only_front_samples():
+  density = jnp.concatenate([jnp.full((4, 3), 2.), jnp.full((4, 5), 100.)], -1)
+  assert float(regularizers.occlusion_loss(density, 3)) == pytest.approx(2.)
+
+
+def test_patches_come_from_many_distinct_poses():
+  config = tiny_config(use_ndc=False, n_random_poses=10000, batch_size_random=4096,
+                       patch_size=8)
+  scene = load_scene(config)
+  poses = regularizer_poses(config, scene)
+  assert poses.shape == (10000, 3, 4)
+  assert len(np.unique(np.round(np.asarray(poses[:, :, 3]), 6), axis=0)) == 10000
+  cam = training.Camera.of(scene)
+  rays = training.random_patch_rays(poses, jax.random.PRNGKey(0), 64, 8, cam)
+  assert rays.origins.shape == (64, 8, 8, 3)
+  # Without NDC a patch's rays share their camera centre: 64 patches, ~64 poses.
+  centres = np.round(np.asarray(rays.origins[:, 0, 0]), 6)
+  assert len(np.unique(centres, axis=0)) >= 60
+  np.testing.assert_allclose(rays.origins, np.broadcast_to(rays.origins[:, :1, :1],
+                                                           rays.origins.shape))
+
+
+def _lowered_flops(config, pools):
+  scene = load_scene(config)
+  cam = training.Camera.of(scene)
+  state = training.init_state(config, jax.random.PRNGKey(0))
+  fn = jax.jit(functools.partial(training.train_step.__wrapped__, config, cam, 0))
+  lowered = fn.lower(state, pools, jax.random.PRNGKey(1))
+  return lowered.compile().cost_analysis()['flops'], lowered.as_text()
+
+
+def test_switched_off_regularisers_are_not_traced():
+  on = tiny_config(depth_tv_loss_mult=0.1, occ_reg_mult=0.01, freq_reg=True)
+  off = tiny_config(depth_tv_loss_mult=0., occ_reg_mult=0., freq_reg=False)
+  scene = load_scene(on)
+  pools = {'real': ray_pool(scene, scene.train_idx)}
+  # Off: the step traces without any random poses at all (it would fail if it used them).
+  flops_off, text_off = _lowered_flops(off, pools)
+  pools_on = dict(pools, random_poses=regularizer_poses(on, scene))
+  flops_on, text_on = _lowered_flops(on, pools_on)
+  # 64 batch rays + 64 patch rays: the patch rendering adds a large share of the work
+  # (the optimizer update and ray sampling are fixed costs of this tiny network).
+  assert flops_on > 1.2 * flops_off
+  assert len(text_on) > len(text_off)

@@ -1,0 +1,26 @@
+"""Trains the baseline and Re-Nerfing rounds: python train.py --gin_configs=gin_configs/demo.gin"""
+import os
+import sys
+
+from renerf_jax import cli, report
+from renerf_jax.configs import exit_on_error
+from renerf_jax.datasets import load_scene
+from renerf_jax.renerf import rounds_table, run_rounds
+
+
+@exit_on_error
+def main(argv=None):
+  config, run_dir = cli.setup(argv, __doc__)
+  scene = load_scene(config)
+  cli.check_run_dir(config, run_dir, create=True)
+  print(f'scene {scene.name}: {len(scene.train_idx)} train / {len(scene.test_idx)} test '
+        f'views at {scene.width}x{scene.height}; run directory {run_dir}', file=sys.stderr)
+  state = run_rounds(config, scene, run_dir)
+  table = rounds_table(state.metrics)
+  report.write_json(os.path.join(run_dir, 'rounds.json'), list(state.metrics))
+  report.write_markdown(os.path.join(run_dir, 'rounds.md'), table + '\n')
+  print(table)
+
+
+if __name__ == '__main__':
+  main()
