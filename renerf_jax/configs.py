@@ -6,6 +6,7 @@ exists in the compiled step: switched-off work costs nothing.
 """
 import argparse
 import dataclasses
+import logging
 import os
 import sys
 from typing import Optional, Sequence, Tuple
@@ -130,6 +131,16 @@ class Config:
     _check(self.n_input_views >= 1, f'Config.n_input_views={self.n_input_views} must be >= 1')
     _check(self.far >= self.near, f'Config.far={self.far} < Config.near={self.near}')
     _check(self.factor >= 1, f'Config.factor={self.factor} must be >= 1')
+
+
+class _DropGinPathProbe(logging.Filter):
+  """gin probes `include` paths as Python packages first and logs a spurious ERROR."""
+
+  def filter(self, record):
+    return not record.getMessage().startswith('Path not found:')
+
+
+logging.getLogger().addFilter(_DropGinPathProbe())
 
 
 def _check(cond: bool, msg: str):

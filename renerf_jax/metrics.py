@@ -204,6 +204,10 @@ def _lpips_forward(net_type):
   return forward
 
 
+# AlexNet's strided convolutions and pools leave no spatial extent below 31 px.
+LPIPS_ALEX_MIN_SIZE = 31
+
+
 class LPIPS:
   """Learned perceptual image patch similarity (Zhang et al. 2018), v0.1.
 
@@ -286,6 +290,9 @@ def image_metrics(pred, gt,
   }
   for net in lpips_nets:
     short = 'alex' if _lpips_net_name(net) == 'alexnet' else 'vgg'
+    if short == 'alex' and min(pred.shape[-3:-1]) < LPIPS_ALEX_MIN_SIZE:
+      raise ValueError(f'LPIPS-alex needs images of at least {LPIPS_ALEX_MIN_SIZE} px per '
+                       f'side (AlexNet pools them away below that), got {pred.shape[-3:-1]}')
     out[f'lpips_{short}'] = LPIPS(net)(pred, gt)
   if 'lpips_alex' in out:
     out['avg_err'] = float(avg_err(out['psnr'], out['ssim'], out['lpips_alex']))

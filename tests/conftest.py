@@ -25,7 +25,7 @@ def blender_dir():
 def tiny_config(**kw):
   """A small, fast Config on the embedded procedural scene."""
   from renerf_jax.configs import Config  # pylint: disable=g-import-not-at-top
-  base = dict(dataset_loader='procedural', procedural_size=(24, 32), max_steps=20,
+  base = dict(dataset_loader='procedural', procedural_size=(32, 40), max_steps=20,
               batch_size=64, num_samples=8, net_depth=2, net_width=32, skip_layer=1,
               net_width_viewdirs=16, max_deg_point=4, deg_view=2, lr_delay_steps=5,
               depth_tv_maxstep=5, anneal_nearfar_steps=5, n_random_poses=50,

@@ -1,0 +1,75 @@
+import os
+
+import jax
+import numpy as np
+import pytest
+
+from renerf_jax import renerf, rundir
+from renerf_jax.datasets import load_scene
+from renerf_jax.pseudo_views import pseudo_view_poses
+from renerf_jax.errors import ConfigError
+from conftest import tiny_config
+
+
+def _files(directory):
+  out = {}
+  for root, _, files in os.walk(directory):
+    for f in files:
+      p = os.path.join(root, f)
+      out[os.path.relpath(p, directory)] = open(p, 'rb').read()
+  return out
+
+
+def test_round_state_is_a_pytree():
+  config = tiny_config()
+  state = renerf.initial_state(config)
+  state = state.replace(params={'w': np.ones(3)}, metrics=({'psnr': 20.},))
+  doubled = jax.tree_util.tree_map(lambda x: x * 2, state)
+  assert float(doubled.metrics[0]['psnr']) == 40.
+  np.testing.assert_array_equal(doubled.params['w'], 2.)
+  assert len(jax.tree_util.tree_leaves(state)) >= 4
+
+
+def test_pseudo_view_poses_7x_on_three_views():
+  config = tiny_config()
+  scene = load_scene(config)
+  poses, meta = pseudo_view_poses(config, scene)
+  assert poses.shape == (12, 3, 4)  # 2 pairs x 6 factors
+  assert sorted({m['beta'] for m in meta}) == [0.1, 0.2, 0.4, 0.6, 0.8, 0.9]
+  both, meta = pseudo_view_poses(tiny_config(pseudo_targets='interp+test'), scene)
+  assert both.shape == (15, 3, 4) and meta[-1] == {'kind': 'test', 'view': 16}
+  with pytest.raises(ConfigError, match='interp_factors'):
+    pseudo_view_poses(tiny_config(interp_factors='0.5,1.5'), scene)
+
+
+def test_rounds_schedule_resume_and_masks(tmp_path):
+  config = tiny_config(num_rounds=1, max_steps=20, pseudo_until=10, use_masks=True,
+                       deform_log2_res=2, hessian_rays=256, mask_keep_frac=0.7)
+  scene = load_scene(config)
+  run_dir = str(tmp_path / 'run')
+  state = renerf.run_rounds(config, scene, run_dir, show_progress=False)
+  assert int(state.round_index) == 1 and len(state.metrics) == 2
+  assert state.metrics[1]['cumulative_seconds'] > state.metrics[0]['cumulative_seconds']
+  # Pseudo rays are sampled before K = 10 and removed after.
+  log = rundir.read_jsonl(os.path.join(run_dir, 'round_1', 'train', 'log.jsonl'))
+  assert [r['pseudo_rays'] > 0 for r in log] == [r['step'] <= 10 for r in log]
+  assert all(r['pseudo_rays'] == 0 for r in
+             rundir.read_jsonl(os.path.join(run_dir, 'round_0', 'train', 'log.jsonl')))
+  # Masks keep ~70% of the pseudo pixels; they were stored with the pseudo-views.
+  assert state.pseudo.masks.mean() == pytest.approx(0.7, abs=0.02)
+  assert state.pseudo.uncertainty.max() > 0
+  # A rerun skips the finished rounds and rewrites nothing.
+  before = _files(run_dir)
+  again = renerf.run_rounds(config, scene, run_dir, show_progress=False)
+  assert _files(run_dir) == before
+  assert again.metrics == state.metrics
+  jax.tree_util.tree_map(np.testing.assert_array_equal, again.params, state.params)
+
+
+def test_all_masked_pseudo_views_still_train_on_real_views(tmp_path):
+  config = tiny_config(num_rounds=1, max_steps=10, pseudo_until=10, use_masks=True,
+                       deform_log2_res=1, hessian_rays=64, mask_threshold=0.)
+  scene = load_scene(config)
+  state = renerf.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
+  assert state.pseudo.masks.max() == 0.
+  assert np.isfinite(state.metrics[1]['psnr']) and state.metrics[1]['nan_skips'] == 0
