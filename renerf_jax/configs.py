@@ -98,6 +98,9 @@ class Config:
   num_rounds: int = 0  # Re-Nerfing rounds after the baseline (0: baseline only).
   pseudo_frac: float = 0.5  # Fraction of each batch drawn from pseudo-views while on.
   pseudo_until: int = 5000  # K: pseudo-view rays only for steps < K (RegNeRF: 5000/69768).
+  pseudo_schedule: str = 'early'  # Table "why": 'early' (steps < K, the method), 'all'
+  # (keep to the end) or 'late' (only the last K steps).
+  renerf_init: str = 'reset'  # 'reset' (D from scratch, the method) or 'continue' (from B).
   interp_factors: str = '7x'  # Preset name (2x, 3x, 3x_b, 3x_c, 4x, 5x, 7x, 11x) or
   # comma-separated factors, e.g. '0.25,0.5'.
   sequencing: str = 'position'  # Neighbour sequencing: ordered, position or rotation.
@@ -124,6 +127,10 @@ class Config:
     _check(self.ray_shape in ('cone', 'cylinder'),
            f'Config.ray_shape={self.ray_shape!r} (cone or cylinder)')
     _check(self.field in ('mlp', 'grid'), f'Config.field={self.field!r} (mlp or grid)')
+    _check(self.pseudo_schedule in ('early', 'all', 'late'),
+           f'Config.pseudo_schedule={self.pseudo_schedule!r} (early, all or late)')
+    _check(self.renerf_init in ('reset', 'continue'),
+           f'Config.renerf_init={self.renerf_init!r} (reset or continue)')
     _check(self.max_steps > 0, f'Config.max_steps={self.max_steps} must be > 0')
     _check(self.batch_size > 0, f'Config.batch_size={self.batch_size} must be > 0')
     _check(self.num_samples >= 2, f'Config.num_samples={self.num_samples} must be >= 2')

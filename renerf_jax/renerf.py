@@ -138,7 +138,8 @@ def round_step(config, scene, state: RoundState, run_dir, show_progress=True) ->
   start = float(state.seconds) + synth_seconds
   result = training.train_model(
       cfg, scene, os.path.join(rdir, 'train'), make_pools(cfg, scene, pseudo),
-      pseudo_until=config.pseudo_until if pseudo is not None else 0,
+      window=training.pseudo_window(cfg) if pseudo is not None else (0, 0),
+      init_params=state.params if r > 0 and config.renerf_init == 'continue' else None,
       eval_fn=cheap_eval_fn(cfg, scene), time_offset=start,
       desc=f'round {r}' if r else 'baseline', show_progress=show_progress)
   seconds = start + result.train_seconds

@@ -236,7 +236,14 @@ def _meta_template():
   return {'train_seconds': np.zeros((), np.float64)}
 
 
-def train_model(config, scene, out_dir, pools, pseudo_until: int = 0,
+def pseudo_window(config):
+  """[start, end) steps in which pseudo-view rays are sampled (Config.pseudo_schedule)."""
+  k = min(config.pseudo_until, config.max_steps)
+  return {'early': (0, k), 'all': (0, config.max_steps),
+          'late': (config.max_steps - k, config.max_steps)}[config.pseudo_schedule]
+
+
+def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
                 eval_fn=None, time_offset: float = 0., desc: str = 'train',
                 show_progress: bool = True) -> TrainResult:
   """Trains a fresh model (or resumes the one in out_dir) for config.max_steps steps.
@@ -245,7 +252,8 @@ def train_model(config, scene, out_dir, pools, pseudo_until: int = 0,
     config: Config. scene: Scene (for its camera).
     out_dir: directory of checkpoints and log.jsonl (resumed when checkpoints exist).
     pools: {'real', optionally 'pseudo', 'random_poses'} (see train_step).
-    pseudo_until: pseudo-view rays are sampled for steps < pseudo_until, then removed.
+    window: (start, end): pseudo-view rays are sampled for start <= step < end only.
+    init_params: start from these parameters instead of a fresh initialisation.
     eval_fn: optional params -> test PSNR (cheap), called every config.eval_every steps.
     time_offset: seconds added to logged times (cumulative time over rounds).
     desc: progress-bar label. show_progress: draw the bar.
@@ -259,14 +267,14 @@ def train_model(config, scene, out_dir, pools, pseudo_until: int = 0,
     raise ValueError(f'Config.batch_size={config.batch_size} is not divisible by the '
                      f'{n_dev} devices')
   n_pseudo_on = 0
-  if 'pseudo' in pools and pseudo_until > 0:
+  if 'pseudo' in pools and window[1] > window[0]:
     n_pseudo_on = int(round(config.pseudo_frac * config.batch_size))
     n_pseudo_on -= n_pseudo_on % n_dev
   base_key = jax.random.PRNGKey(config.seed)
   k_init, base_key = jax.random.split(base_key)
   ckpt_dir = os.path.join(out_dir, 'checkpoints')
   log_path = os.path.join(out_dir, 'log.jsonl')
-  template = {'state': init_state(config, k_init), 'meta': _meta_template()}
+  template = {'state': init_state(config, k_init, init_params), 'meta': _meta_template()}
   restored = rundir.restore_checkpoint(ckpt_dir, template)
   if restored is None:
     state, train_seconds = template['state'], 0.
@@ -286,7 +294,7 @@ def train_model(config, scene, out_dir, pools, pseudo_until: int = 0,
         'train_seconds': np.asarray(secs, np.float64)}}, int(state.step))
 
   for step in range(start, config.max_steps):
-    n_pseudo = n_pseudo_on if step < pseudo_until else 0
+    n_pseudo = n_pseudo_on if window[0] <= step < window[1] else 0
     state, stats = train_step(config, cam, n_pseudo, state, pools,
                               jax.random.fold_in(base_key, step))
     done = step + 1

@@ -52,7 +52,7 @@ def _run(config, scene, pools, n):
 def test_non_finite_step_is_skipped_and_counted():
   config, scene, pools = _setup()
   state, _ = _run(config, scene, pools, 2)
-  before = jax.tree_util.tree_map(np.asarray, state.params)
+  before = jax.tree_util.tree_map(np.array, state.params)  # copies (state is donated)
   bad = dict(pools, real=dict(pools['real'], rgb=pools['real']['rgb'] * np.nan))
   cam = training.Camera.of(scene)
   state, stats = training.train_step(config, cam, 0, state, bad, jax.random.PRNGKey(7))
@@ -132,3 +132,10 @@ def test_data_parallel_on_two_host_devices_matches_one():
     assert int(devices) == n
     out.append(float(loss))
   assert out[0] == pytest.approx(out[1], rel=1e-4)
+
+
+@pytest.mark.parametrize('schedule,window', [('early', (0, 30)), ('all', (0, 100)),
+                                             ('late', (70, 100))])
+def test_pseudo_windows_of_the_ablation_schedules(schedule, window):
+  c = tiny_config(max_steps=100, pseudo_until=30, pseudo_schedule=schedule)
+  assert training.pseudo_window(c) == window

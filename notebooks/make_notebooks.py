@@ -1,0 +1,108 @@
+"""Writes the Colab-style notebooks from their cell sources (run: python notebooks/make_notebooks.py).
+
+Each notebook reads its size from the environment variable RENERF_NOTEBOOK_SMALL (set by
+the tests to run them top to bottom in seconds on the smallest config).
+"""
+import os
+
+import nbformat
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+QUICKSTART = [
+    ('md', '# renerf-jax quick start\n\nOne Re-Nerfing round on the embedded scene (no '
+     'download): train B on 3 views, render pseudo-views between the training cameras, '
+     "estimate B's Laplace uncertainty, mask uncertain pixels, train D from scratch, and "
+     'plot test PSNR against run time. In Colab, first run `!pip install -e .` in a clone.'),
+    ('code', '''import os, sys, tempfile
+sys.path.insert(0, os.path.abspath('..'))  # run from notebooks/ without installing
+import numpy as np
+import matplotlib.pyplot as plt
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import load_scene
+from renerf_jax import renerf, report
+
+SMALL = os.environ.get('RENERF_NOTEBOOK_SMALL') == '1'
+repo = os.path.abspath('..')
+bindings = ['Config.num_rounds = 1', 'Config.use_masks = True', 'Config.deform_log2_res = 4',
+            'Config.hessian_rays = 4096', 'Config.mask_keep_frac = 0.8']
+if SMALL:  # seconds instead of minutes
+  bindings += ['Config.procedural_size = (32, 40)', 'Config.max_steps = 30', 'Config.net_width = 32',
+               'Config.num_samples = 8', 'Config.pseudo_until = 15', 'Config.eval_every = 15',
+               'Config.hessian_rays = 256', 'Config.deform_log2_res = 2', "Config.lpips_nets = ('alex',)"]
+config = load_config([os.path.join(repo, 'gin_configs', 'demo.gin')], bindings)
+scene = load_scene(config)
+print(scene.images.shape, 'train views', scene.train_idx, 'test views', scene.test_idx)'''),
+    ('code', '''plt.figure(figsize=(12, 3))
+for k, i in enumerate(scene.train_idx):
+  plt.subplot(1, len(scene.train_idx), k + 1); plt.imshow(scene.images[i]); plt.axis('off')
+plt.suptitle('the three training views'); plt.show()'''),
+    ('code', '''run_dir = tempfile.mkdtemp(prefix='renerf_quickstart_')
+state = renerf.run_rounds(config, scene, run_dir)
+print(renerf.rounds_table(state.metrics))'''),
+    ('md', '## Pseudo-views, their uncertainty and masks'),
+    ('code', '''pv = state.pseudo
+n = min(4, pv.images.shape[0])
+plt.figure(figsize=(3 * n, 7))
+for j in range(n):
+  plt.subplot(3, n, j + 1); plt.imshow(pv.images[j]); plt.axis('off')
+  plt.subplot(3, n, n + j + 1); plt.imshow(report.colorize(pv.uncertainty[j])); plt.axis('off')
+  plt.subplot(3, n, 2 * n + j + 1); plt.imshow(pv.masks[j], cmap='gray', vmin=0, vmax=1); plt.axis('off')
+plt.suptitle('pseudo-views (top), uncertainty (middle), masks (bottom)'); plt.show()
+print('kept fraction of pseudo pixels:', float(np.mean(pv.masks)))'''),
+    ('md', '## Error against run time'),
+    ('code', '''curves = {}
+for r in range(int(state.round_index) + 1):
+  res = report.read_json(os.path.join(run_dir, f'round_{r}', 'result.json'))
+  curves['baseline' if r == 0 else f'round {r}'] = [(c['time'], c['eval_psnr']) for c in res['curve']]
+for label, pts in curves.items():
+  t, v = zip(*pts); plt.plot(t, v, 'o-', label=label)
+plt.xlabel('cumulative wall-clock seconds'); plt.ylabel('test PSNR (strided pixels)'); plt.legend(); plt.grid(); plt.show()
+assert all(np.isfinite(v) for pts in curves.values() for _, v in pts)'''),
+]
+
+BYO = [
+    ('md', '# Bring your own LLFF scene\n\nPoint `DATA_DIR` at a folder holding `<scene>/'
+     'poses_bounds.npy` and `<scene>/images_8/` (the LLFF layout; make them with COLMAP and '
+     "LLFF's imgs2poses.py), then train the CPU configuration and evaluate it."),
+    ('code', '''import os, sys, tempfile
+sys.path.insert(0, os.path.abspath('..'))
+import matplotlib.pyplot as plt
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import load_scene
+from renerf_jax import renerf
+
+DATA_DIR = os.environ.get('RENERF_DATA_DIR', os.path.abspath('../../shared/data/nerf_llff_data'))
+SCENE = os.environ.get('RENERF_SCENE', 'fern')
+SMALL = os.environ.get('RENERF_NOTEBOOK_SMALL') == '1'
+bindings = [f'Config.data_dir = {DATA_DIR!r}', f'Config.scene = {SCENE!r}']
+if SMALL:
+  bindings += ['Config.max_steps = 10', 'Config.num_samples = 8', 'Config.batch_size = 256',
+               'Config.eval_every = 10', 'Config.eval_stride = 16', "Config.lpips_nets = ('alex',)"]
+config = load_config([os.path.abspath('../gin_configs/llff3_cpu.gin')], bindings)
+scene = load_scene(config)
+print(scene.name, scene.images.shape, 'train', scene.train_idx, 'test', scene.test_idx)'''),
+    ('code', '''run_dir = tempfile.mkdtemp(prefix='renerf_byo_')
+state = renerf.run_rounds(config, scene, run_dir)
+print(renerf.rounds_table(state.metrics))'''),
+    ('code', '''img = plt.imread(os.path.join(run_dir, 'round_0', 'eval', f'test_{scene.test_idx[0]:03d}.png'))
+plt.figure(figsize=(10, 4))
+plt.subplot(1, 2, 1); plt.imshow(scene.images[scene.test_idx[0]]); plt.title('ground truth'); plt.axis('off')
+plt.subplot(1, 2, 2); plt.imshow(img); plt.title('rendered'); plt.axis('off'); plt.show()'''),
+]
+
+
+def build(cells):
+  nb = nbformat.v4.new_notebook()
+  nb.metadata['kernelspec'] = {'name': 'python3', 'display_name': 'Python 3',
+                               'language': 'python'}
+  for kind, src in cells:
+    nb.cells.append(nbformat.v4.new_markdown_cell(src) if kind == 'md'
+                    else nbformat.v4.new_code_cell(src))
+  return nb
+
+
+if __name__ == '__main__':
+  for name, cells in (('quickstart.ipynb', QUICKSTART), ('bring_your_own_llff.ipynb', BYO)):
+    nbformat.write(build(cells), os.path.join(HERE, name))
+    print('wrote', name)
