@@ -12,7 +12,8 @@ Per method: seconds per step are measured on --calib_steps steps after compilati
 max_steps = budget / (seconds per step) is fixed for all its seeds (so every seed runs the
 same step count; schedules given in steps stay as in the base config). Each run is the
 baseline round of train.py (round_0) in <out>/<name>/<method>/seed<k>, resumable.
-Writes <out>/<name>.json, .md (mean +- std over seeds) and _curves.png (test PSNR against
+The calibration is stored per method and reused by a rerun (delete the method's folder to
+recalibrate it, e.g. after measuring on a loaded machine). Writes <out>/<name>.json, .md (mean +- std over seeds) and _curves.png (test PSNR against
 training seconds).
 """
 import argparse
@@ -76,7 +77,12 @@ def main():
     files = [args.base] + [m for m in mods.split(',') if m]
     config = load_config(files, args.gin_bindings)
     scene = load_scene(config)
-    sps = seconds_per_step(config, scene, args.calib_steps)
+    calib_path = os.path.join(args.out, args.name, label, 'calibration.json')
+    if os.path.isfile(calib_path):  # a rerun reuses the calibration and finished runs
+      sps = report.read_json(calib_path)['sec_per_step']
+    else:
+      sps = seconds_per_step(config, scene, args.calib_steps)
+      report.write_json(calib_path, {'sec_per_step': sps})
     steps = max(int(args.budget_s / sps), 1)
     print(f'{label}: {sps:.3f} s/step -> max_steps = {steps}', file=sys.stderr, flush=True)
     runs = []

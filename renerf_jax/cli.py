@@ -2,10 +2,8 @@
 import dataclasses
 import os
 
-import gin
-
 from renerf_jax import report
-from renerf_jax.configs import default_run_dir, load_config, parse_args
+from renerf_jax.configs import config_to_gin, default_run_dir, load_config, parse_args
 from renerf_jax.errors import RunDirError
 
 # Fields that may change between invocations on one run directory without invalidating
@@ -45,7 +43,7 @@ def check_run_dir(config, run_dir, create):
   elif create:
     os.makedirs(run_dir, exist_ok=True)
     report.write_json(path, current)
-    report.write_markdown(os.path.join(run_dir, 'config.gin'), gin.config_str())
+    report.write_markdown(os.path.join(run_dir, 'config.gin'), config_to_gin(config))
   else:
     raise RunDirError(f'no finished run in {run_dir} (config.json missing); train first '
                       f'or pass --run_dir')

@@ -94,6 +94,8 @@ class Config:
   grid_log2_hashmap_size: int = 17  # Entries per level when hashed (2^n); dense if smaller.
   grid_mlp_width: int = 64  # Width of the tiny density / colour MLPs.
   grid_init_scale: float = 1e-4  # Uniform init range of the tables.
+  grid_box: Tuple[Tuple[float, ...], Tuple[float, ...]] = ((-1., -1., -1.), (1., 1., 1.))
+  # Box the grid covers: the NDC cube for LLFF; about +-1.5 for NeRF-synthetic.
   # --- Re-Nerfing ---
   num_rounds: int = 0  # Re-Nerfing rounds after the baseline (0: baseline only).
   pseudo_frac: float = 0.5  # Fraction of each batch drawn from pseudo-views while on.
@@ -197,11 +199,22 @@ def load_config(gin_configs: Sequence[str] = (), gin_bindings: Sequence[str] = (
   try:
     gin.parse_config_files_and_bindings(list(gin_configs), list(gin_bindings),
                                         skip_unknown=False)
+    return Config()
   except (ValueError, KeyError, SyntaxError, TypeError, AttributeError, IOError) as e:
+    if isinstance(e, ConfigError):
+      raise ConfigError(str(e).splitlines()[0]) from None
     first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
     where = ', '.join(list(gin_configs) + [repr(b) for b in gin_bindings])
     raise ConfigError(f'bad gin configuration ({where}): {first}') from None
-  return Config()
+  finally:
+    # The Config is the only product: no binding may leak into later Config() calls.
+    gin.clear_config()
+
+
+def config_to_gin(config: Config) -> str:
+  """The Config as a gin file of bindings that reproduces it exactly."""
+  return '\n'.join(f'Config.{f.name} = {getattr(config, f.name)!r}'
+                    for f in dataclasses.fields(config)) + '\n'
 
 
 def default_run_dir(gin_configs: Sequence[str]) -> str:

@@ -17,8 +17,8 @@ import numpy as np
 import optax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from renerf_jax import cameras, metrics, mip, regularizers, rundir
-from renerf_jax.fields import init_field_params
+from renerf_jax import cameras, metrics, regularizers, rundir
+from renerf_jax.fields import frequency_mask, init_field_params
 from renerf_jax.model import render_rays
 from renerf_jax.progress import progress_bar
 
@@ -133,9 +133,7 @@ def _anneal(rays, step, config):
 def _feature_mask(step, config):
   if not config.freq_reg:
     return None
-  frac = step / (config.freq_reg_end * config.max_steps)
-  return mip.ipe_feature_mask(
-      mip.freq_band_mask(config.max_deg_point - config.min_deg_point, frac))
+  return frequency_mask(config, step / (config.freq_reg_end * config.max_steps))
 
 
 def loss_fn(params, config, cam, batch, patches, step, key):

@@ -52,3 +52,12 @@ def test_missing_config_file():
 def test_bad_value_names_the_field():
   with pytest.raises(ConfigError, match='ray_shape'):
     load_config([], ["Config.ray_shape = 'sphere'"])
+
+
+def test_bindings_do_not_leak_and_config_gin_round_trips(tmp_path):
+  from renerf_jax.configs import config_to_gin
+  c = load_config([os.path.join(REPO, 'gin_configs', 'demo.gin')], ['Config.max_steps = 7'])
+  assert Config().max_steps == 69768  # nothing of the parse leaks into later Configs
+  path = tmp_path / 'config.gin'
+  path.write_text(config_to_gin(c))
+  assert load_config([str(path)]) == c

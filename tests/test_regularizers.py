@@ -85,3 +85,17 @@ def test_switched_off_regularisers_are_not_traced():
   # (the optimizer update and ray sampling are fixed costs of this tiny network).
   assert flops_on > 1.2 * flops_off
   assert len(text_on) > len(text_off)
+
+
+@pytest.mark.parametrize('field', ['mlp', 'grid'])
+def test_freenerf_regularisers_train_on_both_fields(field):
+  config = tiny_config(field=field, freq_reg=True, occ_reg_mult=0.01, occ_reg_range=4,
+                       depth_tv_loss_mult=0., grid_levels=4, grid_base_res=4, grid_max_res=16,
+                       grid_log2_hashmap_size=10, grid_mlp_width=16)
+  scene = load_scene(config)
+  pools = {'real': ray_pool(scene, scene.train_idx)}
+  state = training.init_state(config, jax.random.PRNGKey(0))
+  cam = training.Camera.of(scene)
+  for i in range(2):
+    state, stats = training.train_step(config, cam, 0, state, pools, jax.random.PRNGKey(i))
+  assert bool(stats['finite']) and float(stats['occ']) >= 0.

@@ -1,6 +1,7 @@
 """Field backbones with one interface: (means, covs, viewdirs, feature_mask) -> raw outputs."""
-import jax
 import jax.numpy as jnp
+
+from renerf_jax import mip
 
 
 def make_field(config):
@@ -18,12 +19,25 @@ def make_field(config):
                      max_res=config.grid_max_res, num_features=config.grid_features,
                      log2_hashmap_size=config.grid_log2_hashmap_size,
                      mlp_width=config.grid_mlp_width, init_scale=config.grid_init_scale,
-                     deg_view=config.deg_view, use_viewdirs=config.use_viewdirs)
+                     deg_view=config.deg_view, use_viewdirs=config.use_viewdirs,
+                     bbox_lo=tuple(config.grid_box[0]), bbox_hi=tuple(config.grid_box[1]))
   raise ValueError(f'unknown field backbone {config.field!r}')
+
+
+def frequency_mask(config, fraction):
+  """FreeNeRF's coarse-to-fine mask in the field's feature layout.
+
+  MLP: over the IPE bands (expanded to the IPE features); grid: over the grid levels.
+  """
+  if config.field == 'grid':
+    return mip.freq_band_mask(config.grid_levels, fraction)
+  return mip.ipe_feature_mask(
+      mip.freq_band_mask(config.max_deg_point - config.min_deg_point, fraction))
 
 
 def init_field_params(config, key):
   """Initial parameters of the configured field."""
   field = make_field(config)
   means = jnp.zeros((1, 2, 3))
-  return field.init(key, means, jnp.ones_like(means) * 1e-2, jnp.zeros((1, 3)).at[:, 2].set(-1.))
+  return field.init(key, means, jnp.ones_like(means) * 1e-2,
+                    jnp.zeros((1, 3)).at[:, 2].set(-1.))
