@@ -80,16 +80,24 @@ def main():
     rows.append(row)
     print(row, flush=True)
   report.write_json(args.out + '.json', {'matmul_gflops': roof, 'device': str(jax.devices()[0]),
-                                         'rows': rows})
+                                         'rows': rows, 'command': ' '.join(sys.argv)})
+  text = write_table(rows, roof, args.out)
+  print(text)
+
+
+def write_table(rows, roof, out):
+  """Markdown table of the rows next to the matmul roof; returns its text."""
   table = report.markdown_table(rows, [
       ('config', 'config'), ('sec_per_step', 's/step'), ('rays_per_s', 'rays/s'),
       ('samples_per_s', 'samples/s'), ('step_gflop', 'GFLOP/step'),
       ('achieved_gflops', 'GFLOP/s'), ('flop_efficiency', 'of matmul roof'),
-      ('compile_s', 'compile s')], floatfmt={'rays_per_s': '.0f', 'samples_per_s': '.0f',
-                                              'flop_efficiency': '.1%'})
+      ('compile_s', 'compile s')], floatfmt={
+          'sec_per_step': '.3f', 'rays_per_s': '.0f', 'samples_per_s': '.0f',
+          'step_gflop': '.1f', 'achieved_gflops': '.1f', 'flop_efficiency': '.1%',
+          'compile_s': '.1f'})
   text = f'Matmul roof (float32 2048^2, best of 5): {roof:.1f} GFLOP/s\n\n{table}\n'
-  report.write_markdown(args.out + '.md', text)
-  print(text)
+  report.write_markdown(out + '.md', text)
+  return text
 
 
 if __name__ == '__main__':
