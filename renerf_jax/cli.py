@@ -30,6 +30,9 @@ def check_run_dir(config, run_dir, create):
   current = report.to_jsonable(dataclasses.asdict(config))
   if os.path.isfile(path):
     saved = report.read_json(path)
+    # A field added to Config after the run was made counts as its default value.
+    defaults = report.to_jsonable(dataclasses.asdict(type(config)()))
+    saved = dict({k: v for k, v in defaults.items() if k not in saved}, **saved)
     diff = sorted(k for k in set(saved) | set(current)
                   if k not in RESUMABLE_FIELDS and saved.get(k) != current.get(k))
     if diff:

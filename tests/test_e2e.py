@@ -114,3 +114,18 @@ def test_cli_short_fern_run(tmp_path, fern_dir):
   metrics = json.load(open(os.path.join(run, 'round_0', 'eval', 'metrics.json')))
   assert [m['name'] for m in metrics['per_image']] == ['test_000', 'test_008', 'test_016']
   assert 5. < metrics['mean']['psnr'] < 40.
+
+
+def test_run_dir_made_before_a_new_config_field_still_resumes(tmp_path):
+  from renerf_jax import cli, report
+  from renerf_jax.configs import Config
+  import dataclasses
+  config = Config()
+  saved = report.to_jsonable(dataclasses.asdict(config))
+  del saved['grid_box']  # a field the older code did not have, at its default now
+  os.makedirs(tmp_path / 'run')
+  report.write_json(str(tmp_path / 'run' / 'config.json'), saved)
+  cli.check_run_dir(config, str(tmp_path / 'run'), create=False)
+  with pytest.raises(Exception, match='grid_box'):
+    cli.check_run_dir(dataclasses.replace(config, grid_box=((0., 0., 0.), (1., 1., 1.))),
+                      str(tmp_path / 'run'), create=False)
