@@ -8,7 +8,7 @@ import dataclasses
 import functools
 import os
 import time
-from typing import Any, Optional
+from typing import Any
 
 import flax
 import jax

@@ -9,7 +9,7 @@ import pytest
 
 from renerf_jax import training
 from renerf_jax.configs import load_config
-from renerf_jax.datasets import load_scene, ray_pool
+from renerf_jax.datasets import load_scene
 from renerf_jax.evaluation import evaluate_test_views
 from renerf_jax.renerf import make_pools
 from conftest import LLFF_DIR, REPO

@@ -7,7 +7,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from renerf_jax import mip
 from renerf_jax import uncertainty as unc
 from renerf_jax.configs import Config
 from renerf_jax.datasets import load_scene, ray_pool

@@ -1,6 +1,8 @@
 """Datasets: LLFF, Blender and the embedded procedural scene, behind one `load_scene`."""
 from renerf_jax.datasets.scene import Scene, camera_rays, fewshot_split, ray_pool
 
+__all__ = ["Scene", "camera_rays", "fewshot_split", "load_scene", "ray_pool"]
+
 
 def load_scene(config) -> Scene:
   """Loads the scene selected by config.dataset_loader."""
