@@ -5,13 +5,14 @@ import sys
 from renerf_jax import cli, report
 from renerf_jax.configs import exit_on_error
 from renerf_jax.datasets import load_scene
-from renerf_jax.renerf import rounds_table, run_rounds
+from renerf_jax.renerf import check_rounds_config, rounds_table, run_rounds
 
 
 @exit_on_error
 def main(argv=None):
   config, run_dir = cli.setup(argv, __doc__)
   scene = load_scene(config)
+  check_rounds_config(config, scene)  # Before anything is written.
   cli.check_run_dir(config, run_dir, create=True)
   print(f'scene {scene.name}: {len(scene.train_idx)} train / {len(scene.test_idx)} test '
         f'views at {scene.width}x{scene.height}; run directory {run_dir}', file=sys.stderr)

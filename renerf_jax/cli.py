@@ -45,8 +45,10 @@ def check_run_dir(config, run_dir, create):
       report.write_json(path, current)
   elif create:
     os.makedirs(run_dir, exist_ok=True)
-    report.write_json(path, current)
+    # config.json last: it marks the directory as made (a run killed in between would
+    # otherwise never get its config.gin).
     report.write_markdown(os.path.join(run_dir, 'config.gin'), config_to_gin(config))
+    report.write_json(path, current)
   else:
     raise RunDirError(f'no finished run in {run_dir} (config.json missing); train first '
                       f'or pass --run_dir')

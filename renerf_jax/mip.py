@@ -37,7 +37,10 @@ def conical_frustum_to_gaussian(d, t0, t1, base_radius):
   t_mean = mu + 2 mu h^2 / (3 mu^2 + h^2),
   t_var = h^2 / 3 - 4/15 h^4 (12 mu^2 - h^2) / (3 mu^2 + h^2)^2,
   r_var = r^2 (mu^2 / 4 + 5/12 h^2 - 4/15 h^4 / (3 mu^2 + h^2)).
-  The denominator is floored, so t0 == t1 == 0 (near == far == 0) stays finite.
+  The denominator is floored, so t0 == t1 == 0 (near == far == 0) stays finite, and the
+  h^4 terms are evaluated through the ratio h^2 / (3 mu^2 + h^2) in [0, 1], so nothing
+  overflows float32 before mu^2 itself does (h^4 (12 mu^2 - h^2) overflowed from h ~ 2e6
+  on, giving t_var = 0 and, from h ~ 3e9 on, NaN).
 
   Args:
     d: [..., 3] directions. t0, t1: [..., S] interval ends. base_radius: [..., 1].
@@ -48,10 +51,11 @@ def conical_frustum_to_gaussian(d, t0, t1, base_radius):
   mu = (t0 + t1) / 2.
   hw = (t1 - t0) / 2.
   denom = jnp.maximum(3. * mu**2 + hw**2, _TINY)
-  t_mean = mu + (2. * mu * hw**2) / denom
-  t_var = hw**2 / 3. - (4. / 15.) * (hw**4 * (12. * mu**2 - hw**2)) / denom**2
+  ratio = hw**2 / denom
+  t_mean = mu + 2. * mu * ratio
+  t_var = hw**2 / 3. - (4. / 15.) * ratio**2 * (12. * mu**2 - hw**2)
   t_var = jnp.maximum(t_var, 0.)
-  r_var = base_radius**2 * (mu**2 / 4. + (5. / 12.) * hw**2 - (4. / 15.) * hw**4 / denom)
+  r_var = base_radius**2 * (mu**2 / 4. + (5. / 12.) * hw**2 - (4. / 15.) * hw**2 * ratio)
   return lift_gaussian(d, t_mean, t_var, r_var)
 
 

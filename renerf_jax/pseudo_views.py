@@ -53,7 +53,8 @@ def pseudo_view_poses(config, scene):
     train = np.asarray(scene.poses[scene.train_idx], np.float64)
     if len(train) < 2:
       raise ConfigError(f'Re-Nerfing needs at least 2 training views to interpolate '
-                        f'pseudo-views, got {len(train)} (Config.n_input_views)')
+                        f'pseudo-views, got {len(train)} (Config.n_input_views); use '
+                        f"Config.pseudo_targets='test' or Config.num_rounds=0")
     poses, info = pose_lib.interpolated_poses(train, parse_factors(config.interp_factors),
                                               config.sequencing)
     out.append(poses)

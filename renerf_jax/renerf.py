@@ -130,6 +130,7 @@ def round_step(config, scene, state: RoundState, run_dir, show_progress=True) ->
   rdir = round_dir(run_dir, r)
   if rundir.is_done(rdir):
     return load_round(config, rdir, state)
+  rundir.remove_stale_temp_files(rdir)  # Left by a run killed mid-write.
   cfg = round_config(config, r)
   pseudo, synth_seconds = None, 0.
   if r > 0:
@@ -172,8 +173,21 @@ def load_round(config, rdir, state: RoundState) -> RoundState:
                     rng=jax.random.fold_in(state.rng, r))
 
 
+def check_rounds_config(config, scene):
+  """Raises ConfigError now for pseudo-view settings that round 1 could not use.
+
+  Without this, a single training view with interpolated pseudo-views (no neighbouring
+  pair to interpolate), a bad Config.interp_factors or Config.pseudo_targets would only
+  fail after the baseline had trained. With num_rounds = 0 nothing is checked (the
+  baseline alone needs no pseudo-views).
+  """
+  if config.num_rounds > 0:
+    pseudo_view_poses(config, scene)
+
+
 def run_rounds(config, scene, run_dir, show_progress=True) -> RoundState:
   """Baseline plus config.num_rounds Re-Nerfing rounds: the loop of Figure 2."""
+  check_rounds_config(config, scene)
   state = initial_state(config)
   for _ in range(config.num_rounds + 1):
     state = round_step(config, scene, state, run_dir, show_progress)

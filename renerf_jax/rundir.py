@@ -82,6 +82,30 @@ def truncate_jsonl(path, max_step):
         f.write(json.dumps(rec) + '\n')
 
 
+def remove_stale_temp_files(directory):
+  """Deletes the temp files that killed atomic writes left under `directory` (recursive).
+
+  report.atomic_open writes '.<name>.<random>.tmp' next to its target and renames it over
+  the target; a SIGKILL (or power loss) before the rename leaves the temp file behind. It
+  is never read, but each one can be as large as a checkpoint. Call this only on a
+  directory no other process writes to (the unfinished round of this run).
+
+  Returns:
+    The removed paths.
+  """
+  removed = []
+  for root, _, files in os.walk(directory):
+    for name in files:
+      if name.startswith('.') and name.endswith('.tmp'):
+        path = os.path.join(root, name)
+        try:
+          os.remove(path)
+        except FileNotFoundError:
+          continue
+        removed.append(path)
+  return removed
+
+
 def is_done(directory):
   return os.path.isfile(os.path.join(directory, 'DONE'))
 
