@@ -67,6 +67,8 @@ class Config:
   density_bias: float = -1.
   rgb_padding: float = 0.001
   density_noise: float = 1.  # Std of noise added to raw density in training only.
+  density_activation: str = 'softplus'  # 'softplus' (mip-NeRF) or 'exp' (trunc_exp,
+  # Instant-NGP; the grid backbone needs it, see model.raw_to_outputs).
   # --- RegNeRF regularisers (0 / False switches a term off: nothing of it is traced) ---
   depth_tv_loss_mult: float = 0.1  # Depth-TV weight after the decay (0: off).
   depth_tv_decay: bool = True  # Log-linear decay from _start to _end over _maxstep.
@@ -128,6 +130,8 @@ class Config:
            f'Config.dataset_loader={self.dataset_loader!r} (llff, blender or procedural)')
     _check(self.ray_shape in ('cone', 'cylinder'),
            f'Config.ray_shape={self.ray_shape!r} (cone or cylinder)')
+    _check(self.density_activation in ('softplus', 'exp'),
+           f'Config.density_activation={self.density_activation!r} (softplus or exp)')
     _check(self.field in ('mlp', 'grid'), f'Config.field={self.field!r} (mlp or grid)')
     _check(self.pseudo_schedule in ('early', 'all', 'late'),
            f'Config.pseudo_schedule={self.pseudo_schedule!r} (early, all or late)')

@@ -8,10 +8,35 @@ from renerf_jax import mip
 from renerf_jax.fields import make_field
 
 
-def raw_to_outputs(raw_rgb, raw_density, rgb_padding, density_bias):
-  """Sigmoid colour with padding p (range [-p, 1 + p]) and softplus density with bias."""
+@jax.custom_jvp
+def trunc_exp(x):
+  """exp(x) with the derivative exp(clip(x, -15, 15)) (Instant-NGP's density activation).
+
+  The forward value is clipped at exp(30) so that float32 stays finite; the clipped
+  derivative keeps one huge raw density from producing a huge gradient step.
+  """
+  return jnp.exp(jnp.minimum(x, 30.))
+
+
+@trunc_exp.defjvp
+def _trunc_exp_jvp(primals, tangents):
+  (x,), (dx,) = primals, tangents
+  return trunc_exp(x), jnp.exp(jnp.clip(x, -15., 15.)) * dx
+
+
+def raw_to_outputs(raw_rgb, raw_density, rgb_padding, density_bias,
+                   density_activation='softplus'):
+  """Sigmoid colour with padding p (range [-p, 1 + p]); density act(raw + bias).
+
+  density_activation: 'softplus' (mip-NeRF / RegNeRF) or 'exp' (trunc_exp, Instant-NGP:
+  reaches the huge densities that a narrow annealed sampling interval needs in a few
+  steps; with softplus a grid backbone's colours saturate before its density catches up).
+  """
   rgb = jax.nn.sigmoid(raw_rgb) * (1. + 2. * rgb_padding) - rgb_padding
-  density = jax.nn.softplus(raw_density + density_bias)
+  if density_activation == 'exp':
+    density = trunc_exp(raw_density + density_bias)
+  else:
+    density = jax.nn.softplus(raw_density + density_bias)
   return rgb, density
 
 
@@ -55,7 +80,7 @@ def render_rays(config, params, rays, key, train: bool,
       raw_density = raw_density + config.density_noise * jax.random.normal(
           k_noise, raw_density.shape)
     rgb, density = raw_to_outputs(raw_rgb, raw_density, config.rgb_padding,
-                                  config.density_bias)
+                                  config.density_bias, config.density_activation)
     out = mip.volumetric_rendering(rgb, density, t_vals, rays.directions, config.white_bkgd)
     out.update(t_vals=t_vals, density=density)
     weights = out['weights']

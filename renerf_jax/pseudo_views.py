@@ -94,8 +94,19 @@ def save_pseudo_views(directory, pv: PseudoViews, meta, save_png=True):
       report.save_image_png(os.path.join(directory, f'mask_{i:03d}.png'),
                             arrays['masks'][i])
       if np.any(arrays['uncertainty'][i]):
-        report.save_image_png(os.path.join(directory, f'uncertainty_{i:03d}.png'),
-                              report.colorize(arrays['uncertainty'][i]))
+        heat = report.colorize(arrays['uncertainty'][i])
+        report.save_image_png(os.path.join(directory, f'uncertainty_{i:03d}.png'), heat)
+        report.save_image_png(os.path.join(directory, f'panel_{i:03d}.png'),
+                              side_by_side(arrays['images'][i], heat, arrays['masks'][i]))
+
+
+def side_by_side(image, heat, mask):
+  """[H, 3W + 2 gap, 3] panel: pseudo-view | uncertainty heat-map | view with the masked
+  pixels blacked out (what training sees)."""
+  mask = np.asarray(mask, np.float32).reshape(image.shape[:2] + (1,))
+  gap = np.ones(image.shape[:1] + (4, 3), np.float32)
+  return np.concatenate([image[..., :3], gap, heat[..., :3], gap, image[..., :3] * mask],
+                        axis=1)
 
 
 def load_pseudo_views(directory) -> Optional[PseudoViews]:

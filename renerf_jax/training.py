@@ -86,6 +86,12 @@ def data_sharding():
   return NamedSharding(mesh, PartitionSpec('data'))
 
 
+def replicated_sharding():
+  """Sharding of the train state: replicated on all local devices (as train_step returns
+  it, so the first step compiles the same executable as every later step)."""
+  return NamedSharding(Mesh(np.array(jax.devices()), ('data',)), PartitionSpec())
+
+
 def sample_from_pool(pool, key, n):
   """n rays drawn uniformly with replacement from a pool {'rays', 'rgb', 'lossmult'}."""
   n_pool = pool['rgb'].shape[0]
@@ -281,6 +287,7 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
   else:
     state, train_seconds = restored['state'], float(restored['meta']['train_seconds'])
     rundir.truncate_jsonl(log_path, int(state.step))
+  state = jax.device_put(state, replicated_sharding())
   start = int(state.step)
   curve = [r for r in rundir.read_jsonl(log_path) if 'eval_psnr' in r]
   bar = progress_bar(total=config.max_steps, initial=start, desc=desc,

@@ -61,3 +61,16 @@ def test_bindings_do_not_leak_and_config_gin_round_trips(tmp_path):
   path = tmp_path / 'config.gin'
   path.write_text(config_to_gin(c))
   assert load_config([str(path)]) == c
+
+
+def test_renerf_configs_are_their_base_plus_three_rounds():
+  import dataclasses
+  for name, base_name, k in (('llff3_renerf.gin', 'llff3.gin', 5000),
+                             ('llff3_cpu_renerf.gin', 'llff3_cpu.gin', 1000)):
+    c = load_config([os.path.join(REPO, 'gin_configs', name)])
+    base = load_config([os.path.join(REPO, 'gin_configs', base_name)])
+    assert (c.num_rounds, c.interp_factors, c.pseudo_until) == (3, '7x', k)
+    assert (c.renerf_init, c.pseudo_schedule) == ('reset', 'early')
+    # K comes after the near/far annealing and the depth-TV decay.
+    assert k > max(c.anneal_nearfar_steps, c.depth_tv_maxstep)
+    assert dataclasses.replace(c, num_rounds=0) == dataclasses.replace(base, num_rounds=0)

@@ -58,6 +58,13 @@ def test_rounds_schedule_resume_and_masks(tmp_path):
   # Masks keep ~70% of the pseudo pixels; they were stored with the pseudo-views.
   assert state.pseudo.masks.mean() == pytest.approx(0.7, abs=0.02)
   assert state.pseudo.uncertainty.max() > 0
+  # Side-by-side PNG: view | uncertainty | masked view, masked pixels black in the third.
+  import imageio.v3 as iio
+  panel = iio.imread(os.path.join(run_dir, 'round_1', 'pseudo_views', 'panel_000.png'))
+  h, w = state.pseudo.images.shape[1:3]
+  assert panel.shape[:2] == (h, 3 * w + 8)
+  third = panel[:, 2 * w + 8:]
+  assert np.all(third[state.pseudo.masks[0].reshape(h, w) == 0] == 0)
   # A rerun skips the finished rounds and rewrites nothing.
   before = _files(run_dir)
   again = renerf.run_rounds(config, scene, run_dir, show_progress=False)

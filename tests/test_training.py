@@ -139,3 +139,29 @@ def test_data_parallel_on_two_host_devices_matches_one():
 def test_pseudo_windows_of_the_ablation_schedules(schedule, window):
   c = tiny_config(max_steps=100, pseudo_until=30, pseudo_schedule=schedule)
   assert training.pseudo_window(c) == window
+
+
+def test_trunc_exp_value_clipped_gradient_and_huge_inputs():
+  from renerf_jax.model import raw_to_outputs, trunc_exp
+  x = jnp.array([-30., 0., 2., 20., 1e10])
+  y = np.asarray(trunc_exp(x))
+  assert np.all(np.isfinite(y))
+  np.testing.assert_allclose(y[:4], np.exp([-30., 0., 2., 20.]), rtol=1e-5)
+  g = np.asarray(jax.vmap(jax.grad(trunc_exp))(x))
+  assert np.all(np.isfinite(g))
+  np.testing.assert_allclose(g, np.exp(np.clip([-30., 0., 2., 20., 1e10], -15., 15.)),
+                             rtol=1e-6)
+  _, soft = raw_to_outputs(jnp.zeros(3), jnp.array([-1., 0., 1.]), 0.001, -1., 'softplus')
+  _, ex = raw_to_outputs(jnp.zeros(3), jnp.array([-1., 0., 1.]), 0.001, -1., 'exp')
+  np.testing.assert_allclose(soft, np.log1p(np.exp([-2., -1., 0.])), rtol=1e-6)
+  np.testing.assert_allclose(ex, np.exp([-2., -1., 0.]), rtol=1e-6)
+
+
+def test_train_model_compiles_the_step_once(tmp_path):
+  """The initial state is placed like train_step's output, so step 1 does not recompile."""
+  config, scene, pools = _setup(max_steps=3, field='grid', density_activation='exp',
+                                grid_levels=4, grid_max_res=32)
+  before = training.train_step._cache_size()
+  result = training.train_model(config, scene, str(tmp_path), pools, show_progress=False)
+  assert int(result.state.step) == 3
+  assert training.train_step._cache_size() - before == 1
