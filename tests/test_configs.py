@@ -66,11 +66,12 @@ def test_bindings_do_not_leak_and_config_gin_round_trips(tmp_path):
 def test_renerf_configs_are_their_base_plus_three_rounds():
   import dataclasses
   for name, base_name, k in (('llff3_renerf.gin', 'llff3.gin', 5000),
-                             ('llff3_cpu_renerf.gin', 'llff3_cpu.gin', 1000)):
+                             ('llff3_cpu_renerf.gin', 'llff3_cpu.gin', 1000),
+                             ('llff3_fast_renerf.gin', 'llff3_fast.gin', 325)):
     c = load_config([os.path.join(REPO, 'gin_configs', name)])
     base = load_config([os.path.join(REPO, 'gin_configs', base_name)])
     assert (c.num_rounds, c.interp_factors, c.pseudo_until) == (3, '7x', k)
     assert (c.renerf_init, c.pseudo_schedule) == ('reset', 'early')
     # K comes after the near/far annealing and the depth-TV decay.
-    assert k > max(c.anneal_nearfar_steps, c.depth_tv_maxstep)
+    assert k > max(c.anneal_nearfar_steps, c.depth_tv_maxstep, c.lr_delay_steps)
     assert dataclasses.replace(c, num_rounds=0) == dataclasses.replace(base, num_rounds=0)

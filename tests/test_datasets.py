@@ -106,10 +106,11 @@ def test_poses_wrong_shape(tmp_path):
     load_scene(_cfg(root))
 
 
-def test_poses_with_nan(tmp_path):
+@pytest.mark.parametrize('bad', [np.nan, np.inf, -np.inf])
+def test_poses_with_nan(tmp_path, bad):
   root = _fake_llff(tmp_path)
   arr = np.load(root / 'toy' / 'poses_bounds.npy')
-  arr[4, 3] = np.nan
+  arr[4, 3] = bad
   np.save(root / 'toy' / 'poses_bounds.npy', arr)
   with pytest.raises(DataError, match='NaN or inf.*row 4'):
     load_scene(_cfg(root))
