@@ -108,7 +108,9 @@ class Config:
   interp_factors: str = '7x'  # Preset name (2x, 3x, 3x_b, 3x_c, 4x, 5x, 7x, 11x) or
   # comma-separated factors, e.g. '0.25,0.5'.
   sequencing: str = 'position'  # Neighbour sequencing: ordered, position or rotation.
-  pseudo_targets: str = 'interp'  # 'interp', 'test' (test poses) or 'interp+test'.
+  pseudo_targets: str = 'interp'  # 'interp', 'test' (test poses), 'random' or a
+  # '+' combination such as 'interp+test'.
+  pseudo_n_random: int = 4  # Random unobserved poses for pseudo_targets 'random'.
   # --- Laplace uncertainty (Bayes' Rays style) and masks ---
   use_masks: bool = False  # Mask uncertain pseudo-view pixels (runs the Hessian pass).
   deform_log2_res: int = 8  # L: the deformation grid has (2^L + 1)^3 vertices.

@@ -428,6 +428,40 @@ def interpolated_poses(
   return poses, meta
 
 
+def camera_path(c2w: Any, n_frames: int) -> np.ndarray:
+  """A smooth there-and-back camera path through the given cameras (for videos).
+
+  The cameras are chained by `sequence_cameras` (nearest neighbour on position); the
+  path runs along the chain and back, its poses spaced evenly in path length (positions
+  by lerp, rotations by SLERP, as the pseudo-views). If every camera sits at one
+  position, the frames are spaced evenly per segment instead.
+
+  Args:
+    c2w: [n, 3, 4] (or [n, 4, 4]) camera-to-world matrices, n >= 1.
+    n_frames: number of poses, >= 1.
+
+  Returns:
+    [n_frames, 3, 4] float64 camera-to-world matrices; the first is the first camera
+    of the chain.
+  """
+  c2w = _as_c2w_stack(c2w)
+  if n_frames < 1:
+    raise ValueError(f'n_frames must be >= 1, got {n_frames}')
+  chain = c2w[sequence_cameras(c2w, 'position')]
+  if len(chain) == 1:
+    return np.repeat(chain, n_frames, axis=0)
+  seg = np.linalg.norm(np.diff(chain[:, :, 3], axis=0), axis=-1)
+  if seg.sum() <= 0:
+    seg = np.ones_like(seg)
+  knots = np.concatenate([[0.], np.cumsum(seg)])
+  # Ping-pong: s in [0, 2 L) maps to the path position L - |L - s|.
+  s = np.linspace(0., 2. * knots[-1], n_frames, endpoint=False)
+  s = knots[-1] - np.abs(knots[-1] - s)
+  i = np.clip(np.searchsorted(knots, s, side='right') - 1, 0, len(seg) - 1)
+  beta = np.clip((s - knots[i]) / np.maximum(seg[i], 1e-12), 0., 1.)
+  return interpolate_pose(chain[i], chain[i + 1], beta)
+
+
 def look_at(position: Any, target: Any, up: Any) -> np.ndarray:
   """Camera-to-world matrices of cameras looking at a target.
 

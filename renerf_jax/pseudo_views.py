@@ -38,7 +38,9 @@ def pseudo_view_poses(config, scene):
 
   'interp': every factor between every neighbouring pair of training cameras (position
   lerp, rotation SLERP; pairs from config.sequencing). 'test': the test poses (the
-  paper's "optimising for specific views"). 'interp+test': both.
+  paper's "optimising for specific views"). 'random': config.pseudo_n_random random
+  unobserved poses, drawn like the depth-TV poses (the control for 'test' in the view
+  selection table). Targets combine with '+', e.g. 'interp+test'.
 
   Returns:
     (poses [M, 3, 4] float32, meta: list of dicts).
@@ -46,9 +48,9 @@ def pseudo_view_poses(config, scene):
   out, meta = [], []
   targets = config.pseudo_targets.split('+')
   for t in targets:
-    if t not in ('interp', 'test'):
+    if t not in ('interp', 'test', 'random'):
       raise ConfigError(f'Config.pseudo_targets={config.pseudo_targets!r} '
-                        "(interp, test or interp+test)")
+                        "(interp, test, random or a '+' combination)")
   if 'interp' in targets:
     train = np.asarray(scene.poses[scene.train_idx], np.float64)
     if len(train) < 2:
@@ -63,7 +65,29 @@ def pseudo_view_poses(config, scene):
   if 'test' in targets:
     out.append(np.asarray(scene.poses[scene.test_idx], np.float64))
     meta += [{'kind': 'test', 'view': int(i)} for i in scene.test_idx]
+  if 'random' in targets:
+    out.append(random_target_poses(config, scene))
+    meta += [{'kind': 'random', 'index': i} for i in range(config.pseudo_n_random)]
   return np.concatenate(out, 0).astype(np.float32), meta
+
+
+def random_target_poses(config, scene):
+  """config.pseudo_n_random random unobserved poses [n, 3, 4] (float64).
+
+  Drawn by the generator of the depth-TV poses (forward-facing: within and slightly
+  beyond the training cameras, looking at the focus point; 360: on the sphere of the
+  training cameras), from a seed of their own, so they are the same in every round.
+  """
+  if config.pseudo_n_random < 1:
+    raise ConfigError(f'Config.pseudo_n_random={config.pseudo_n_random} must be >= 1 '
+                      "with Config.pseudo_targets containing 'random'")
+  rng = np.random.default_rng([config.seed, 7919])
+  train = np.asarray(scene.poses[scene.train_idx], np.float64)
+  if scene.forward_facing:
+    return pose_lib.random_poses_forward_facing(train, config.pseudo_n_random, rng,
+                                                focus_depth=scene.focus_depth,
+                                                spread=config.random_pose_spread)
+  return pose_lib.random_poses_sphere(train, config.pseudo_n_random, rng)
 
 
 def render_pseudo_views(config, scene, params, poses, show_progress=True) -> PseudoViews:

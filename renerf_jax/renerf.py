@@ -12,6 +12,7 @@ from its last atomic checkpoint.
 """
 import dataclasses
 import os
+import shutil
 import time
 from typing import Any, Optional, Tuple
 
@@ -24,6 +25,7 @@ from flax import serialization
 from renerf_jax import poses as pose_lib
 from renerf_jax import report, rundir, training
 from renerf_jax.datasets import camera_rays, ray_pool
+from renerf_jax.errors import RunDirError
 from renerf_jax.evaluation import cheap_eval_fn, evaluate_test_views
 from renerf_jax.pseudo_views import (PseudoViews, load_pseudo_views, pseudo_view_poses,
                                      render_pseudo_views, save_pseudo_views)
@@ -183,6 +185,56 @@ def check_rounds_config(config, scene):
   """
   if config.num_rounds > 0:
     pseudo_view_poses(config, scene)
+
+
+# Config fields that only act from round 1 on (plus knobs that change no result): two
+# configs that differ only in these train the same baseline, bit for bit.
+ROUND_FIELDS = ('num_rounds', 'pseudo_frac', 'pseudo_until', 'pseudo_schedule',
+                'renerf_init', 'interp_factors', 'sequencing', 'pseudo_targets',
+                'pseudo_n_random', 'use_masks', 'deform_log2_res', 'hessian_rays',
+                'hessian_lambda', 'mask_keep_frac', 'mask_threshold', 'checkpoint_every',
+                'render_chunk')
+
+
+def baseline_differences(config, saved_config: dict):
+  """Names of the fields (outside ROUND_FIELDS) in which two configs' baselines differ."""
+  current = report.to_jsonable(dataclasses.asdict(config))
+  defaults = report.to_jsonable(dataclasses.asdict(type(config)()))
+  saved = dict({k: v for k, v in defaults.items() if k not in saved_config}, **saved_config)
+  return sorted(k for k in set(saved) | set(current)
+                if k not in ROUND_FIELDS and saved.get(k) != current.get(k))
+
+
+def copy_baseline(config, src_run_dir, dst_run_dir):
+  """Copies a finished round_0 of another run instead of training the same baseline again.
+
+  Ablations (the tables "why", view selection, masks) vary only what happens from round
+  1 on, so every variant of one seed has the same baseline. src_run_dir must hold
+  config.json (written by cli.check_run_dir) whose baseline fields equal config's, and a
+  finished round_0; dst_run_dir must not have a round_0 yet. The copy is made in a temp
+  directory and renamed into place, so a killed copy leaves no half round_0 behind.
+
+  Raises:
+    RunDirError: the source is unfinished or was made with another baseline config, or
+      the destination already has a round_0.
+  """
+  src, dst = round_dir(src_run_dir, 0), round_dir(dst_run_dir, 0)
+  if not rundir.is_done(src):
+    raise RunDirError(f'{src} is not a finished round (no DONE): nothing to copy')
+  cfg_path = os.path.join(src_run_dir, 'config.json')
+  if not os.path.isfile(cfg_path):
+    raise RunDirError(f'{cfg_path} missing: cannot tell which config trained {src}')
+  diff = baseline_differences(config, report.read_json(cfg_path))
+  if diff:
+    raise RunDirError(f'{src} was trained with another baseline config (differs in '
+                      f'{", ".join(diff)}); it cannot stand in for {dst}')
+  if os.path.exists(dst):
+    raise RunDirError(f'{dst} exists; refusing to overwrite it with a copy of {src}')
+  os.makedirs(dst_run_dir, exist_ok=True)
+  tmp = os.path.join(dst_run_dir, f'.round_0.{os.getpid()}.tmp')
+  shutil.rmtree(tmp, ignore_errors=True)
+  shutil.copytree(src, tmp)
+  os.replace(tmp, dst)
 
 
 def run_rounds(config, scene, run_dir, show_progress=True) -> RoundState:

@@ -573,3 +573,30 @@ def test_random_poses_sphere_default_center_and_poles():
   np.testing.assert_allclose(-out[:, :, 2], -rel / 2.0, atol=1e-12)
   # Full elevation range [-90, 90] degrees is used.
   assert rel[:, 2].min() < 0.0 < rel[:, 2].max()
+
+
+def test_camera_path_is_smooth_valid_and_goes_there_and_back():
+  rng = np.random.default_rng(3)
+  rots = poses.quaternion_to_rotation(rng.normal(size=(4, 4)))
+  c2w = np.concatenate([rots, rng.normal(size=(4, 3, 1))], -1)
+  path = poses.camera_path(c2w, 40)
+  assert path.shape == (40, 3, 4) and np.all(np.isfinite(path))
+  rot = path[:, :, :3]
+  np.testing.assert_allclose(rot @ np.swapaxes(rot, 1, 2),
+                             np.broadcast_to(np.eye(3), rot.shape), atol=1e-9)
+  np.testing.assert_allclose(np.linalg.det(rot), 1., atol=1e-9)
+  chain = c2w[poses.sequence_cameras(c2w, 'position')]
+  np.testing.assert_allclose(path[0], chain[0], atol=1e-9)
+  np.testing.assert_allclose(path[20], chain[-1], atol=1e-9)  # the far end at half-way
+  np.testing.assert_allclose(path[1:20, :, 3], path[39:20:-1, :, 3], atol=1e-9)  # and back
+  steps = np.linalg.norm(np.diff(path[:21, :, 3], axis=0), axis=-1)
+  # Even spacing in path length: every step is the same except the (shorter) chords
+  # across the two interior corners of the 4-camera chain.
+  assert np.sum(np.isclose(steps, steps.max(), rtol=1e-6)) >= len(steps) - 2
+  # Degenerate inputs: one camera, all cameras at one position.
+  assert poses.camera_path(c2w[:1], 5).shape == (5, 3, 4)
+  same = c2w.copy()
+  same[:, :, 3] = 0.
+  assert np.all(np.isfinite(poses.camera_path(same, 9)))
+  with pytest.raises(ValueError, match='n_frames'):
+    poses.camera_path(c2w, 0)

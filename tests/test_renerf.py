@@ -38,6 +38,19 @@ def test_pseudo_view_poses_7x_on_three_views():
   assert sorted({m['beta'] for m in meta}) == [0.1, 0.2, 0.4, 0.6, 0.8, 0.9]
   both, meta = pseudo_view_poses(tiny_config(pseudo_targets='interp+test'), scene)
   assert both.shape == (15, 3, 4) and meta[-1] == {'kind': 'test', 'view': 16}
+  rnd, meta = pseudo_view_poses(tiny_config(pseudo_targets='test+random',
+                                            pseudo_n_random=4), scene)
+  assert rnd.shape == (7, 3, 4) and [m['kind'] for m in meta] == ['test'] * 3 + ['random'] * 4
+  rot = rnd[3:, :, :3].astype(np.float64)
+  np.testing.assert_allclose(rot @ np.swapaxes(rot, 1, 2), np.broadcast_to(np.eye(3), rot.shape),
+                             atol=1e-5)
+  assert len({tuple(np.round(p[:, 3], 6)) for p in rnd[3:]}) == 4  # distinct positions
+  again, _ = pseudo_view_poses(tiny_config(pseudo_targets='random'), scene)
+  np.testing.assert_array_equal(again, rnd[3:])  # the same poses in every round
+  with pytest.raises(ConfigError, match='pseudo_n_random'):
+    pseudo_view_poses(tiny_config(pseudo_targets='random', pseudo_n_random=0), scene)
+  with pytest.raises(ConfigError, match='pseudo_targets'):
+    pseudo_view_poses(tiny_config(pseudo_targets='interp+views'), scene)
   with pytest.raises(ConfigError, match='interp_factors'):
     pseudo_view_poses(tiny_config(interp_factors='0.5,1.5'), scene)
 
@@ -80,3 +93,31 @@ def test_all_masked_pseudo_views_still_train_on_real_views(tmp_path):
   state = renerf.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
   assert state.pseudo.masks.max() == 0.
   assert np.isfinite(state.metrics[1]['psnr']) and state.metrics[1]['nan_skips'] == 0
+
+
+def test_copy_baseline_shares_round_0_between_variants_only(tmp_path):
+  from renerf_jax import cli  # pylint: disable=g-import-not-at-top
+  from renerf_jax.errors import RunDirError  # pylint: disable=g-import-not-at-top
+  config = tiny_config(max_steps=10, num_rounds=0)
+  scene = load_scene(config)
+  src, dst = str(tmp_path / 'src'), str(tmp_path / 'dst')
+  cli.check_run_dir(config, src, create=True)
+  renerf.run_rounds(config, scene, src, show_progress=False)
+  # A variant that differs only from round 1 on reuses the baseline and trains round 1.
+  variant = tiny_config(max_steps=10, num_rounds=1, pseudo_schedule='all',
+                        pseudo_targets='test', use_masks=True)
+  assert renerf.baseline_differences(variant, {}) != []  # vs defaults: differs
+  renerf.copy_baseline(variant, src, dst)
+  before = _files(os.path.join(dst, 'round_0'))
+  assert before == _files(os.path.join(src, 'round_0'))
+  state = renerf.run_rounds(variant, scene, dst, show_progress=False)
+  assert len(state.metrics) == 2 and _files(os.path.join(dst, 'round_0')) == before
+  assert rundir.is_done(os.path.join(dst, 'round_1'))
+  # Another baseline config, an existing destination or an unfinished source: refused.
+  with pytest.raises(RunDirError, match='lr_init'):
+    renerf.copy_baseline(tiny_config(max_steps=10, lr_init=1e-2), src, str(tmp_path / 'x'))
+  with pytest.raises(RunDirError, match='exists'):
+    renerf.copy_baseline(variant, src, dst)
+  with pytest.raises(RunDirError, match='not a finished round'):
+    renerf.copy_baseline(variant, str(tmp_path / 'none'), str(tmp_path / 'y'))
+  assert not os.path.exists(tmp_path / 'x') and not os.path.exists(tmp_path / 'y')

@@ -1,0 +1,103 @@
+"""Camera-path video of two rounds side by side (default: the baseline | the last round).
+
+The path runs through all cameras of the scene (training and test, chained by nearest
+neighbour) and back, poses interpolated as the pseudo-views are (lerp + SLERP). Each frame
+is <round A> | <round B>, rendered at 1/--downscale of the training resolution. Writes a
+GIF (imageio) and a PNG of the middle frame. Fern, after renerf_rounds.py:
+
+  python experiments/render_video.py \
+    --run_dir experiments/results/fern_rounds_fast/Re-Nerfing/seed0 \
+    --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --scene fern --out experiments/results/fern_rounds_fast_video.gif
+"""
+import argparse
+import dataclasses
+import os
+import sys
+
+import imageio.v3 as iio
+import jax
+import numpy as np
+from flax import serialization
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from renerf_jax import poses as pose_lib  # pylint: disable=g-import-not-at-top
+from renerf_jax import renerf, report, rundir, training
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import camera_rays, load_scene
+from renerf_jax.progress import progress_bar
+from renerf_jax.rendering import render_image
+
+
+def load_params(config, run_dir, r):
+  rdir = renerf.round_dir(run_dir, r)
+  if not rundir.is_done(rdir):
+    raise SystemExit(f'error: {rdir} is not a finished round')
+  template = training.init_state(renerf.round_config(config, r),
+                                 jax.random.PRNGKey(0)).params
+  with open(os.path.join(rdir, 'params.msgpack'), 'rb') as f:
+    return serialization.from_bytes(template, f.read())
+
+
+def finished_rounds(run_dir):
+  r = 0
+  while rundir.is_done(renerf.round_dir(run_dir, r)):
+    r += 1
+  return r
+
+
+def downscaled(scene, factor):
+  """The scene with cameras of 1/factor the resolution (images only give the shape)."""
+  if factor == 1:
+    return scene
+  return dataclasses.replace(scene, images=scene.images[:, ::factor, ::factor],
+                             focal=scene.focal * scene.images[:, ::factor].shape[1]
+                             / scene.height)
+
+
+def main():
+  p = argparse.ArgumentParser(description=__doc__,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+  p.add_argument('--run_dir', required=True)
+  p.add_argument('--config', required=True)
+  p.add_argument('--gin_bindings', action='append', default=[])
+  p.add_argument('--data_dir')
+  p.add_argument('--scene')
+  p.add_argument('--rounds', type=int, nargs=2, default=None,
+                 help='the two rounds to show (default: 0 and the last finished)')
+  p.add_argument('--frames', type=int, default=40)
+  p.add_argument('--fps', type=float, default=10.)
+  p.add_argument('--downscale', type=int, default=2)
+  p.add_argument('--out', required=True, help='output .gif')
+  args = p.parse_args()
+  bindings = list(args.gin_bindings)
+  if args.data_dir:
+    bindings.append(f"Config.data_dir='{args.data_dir}'")
+  if args.scene:
+    bindings.append(f"Config.scene='{args.scene}'")
+  config = load_config([args.config], bindings)
+  rounds = args.rounds or (0, finished_rounds(args.run_dir) - 1)
+  params = [load_params(config, args.run_dir, r) for r in rounds]
+  scene = load_scene(config)
+  small = downscaled(scene, args.downscale)
+  path = pose_lib.camera_path(scene.poses, args.frames).astype(np.float32)
+  frames = []
+  bar = progress_bar(total=len(path), desc='video', unit='frame')
+  for pose in path:
+    rays = jax.tree_util.tree_map(lambda x: x[0], camera_rays(small, None, pose[None]))
+    imgs = [render_image(config, prm, rays)['rgb'] for prm in params]
+    gap = np.ones((small.height, 4, 3), np.float32)
+    frames.append(report.to_uint8(np.concatenate([imgs[0], gap, imgs[1]], 1)))
+    bar.update(1)
+  bar.close()
+  os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+  tmp = args.out + '.tmp.gif'
+  iio.imwrite(tmp, np.stack(frames), duration=1000. / args.fps, loop=0)
+  os.replace(tmp, args.out)
+  report.save_image_png(os.path.splitext(args.out)[0] + '_frame.png',
+                        frames[len(frames) // 4])
+  print(f'wrote {args.out}: {len(frames)} frames, rounds {rounds[0]} | {rounds[1]}')
+
+
+if __name__ == '__main__':
+  main()

@@ -1,0 +1,249 @@
+"""Shared machinery of the paper-table scripts (renerf_rounds.py, table_*.py).
+
+A table is a list of variants, each the base config plus gin bindings, run for a number of
+rounds per seed with a fixed step count per round; every number is a mean +- std over
+seeds. Runs live in <out>/<name>/<variant>/seed<k> (train.py-style run directories with
+config.json: resumable, finished rounds are never rewritten, a directory made with
+another config is refused).
+
+Variants that differ only from round 1 on have the same baseline (renerf.ROUND_FIELDS):
+it is trained once per seed and copied (renerf.copy_baseline) into the other variants'
+directories, and can be taken from another table's runs with --baseline_from (e.g. the
+rounds table's). A copied baseline is the same model bit for bit, so sharing changes no
+number; its row is shown once.
+
+Optionally (--equal_time) the baseline is also trained for the same total wall time as
+the rounds of the first variant (training + pseudo-view synthesis + uncertainty): a FIXED
+step count, the same for every seed, stored in <out>/<name>/equal_time.json and reused:
+the median over seeds of (cumulative seconds of the rounds) / (baseline seconds per step).
+The median makes it robust to one seed having shared the CPU with something else.
+
+Writes <out>/<name>.json, <name>.md (our numbers; the paper's beside them where the
+script has them) and <name>_time.png (cheap test PSNR against cumulative seconds).
+"""
+import argparse
+import dataclasses
+import os
+import shlex
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from renerf_jax import cli, renerf, report, rundir  # pylint: disable=g-import-not-at-top
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import load_scene
+
+METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
+NAMES = {'psnr': 'PSNR', 'ssim': 'SSIM', 'lpips_alex': 'LPIPS-alex', 'lpips_vgg': 'LPIPS-vgg'}
+
+
+def parser(description, default_rounds):
+  p = argparse.ArgumentParser(description=description,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+  p.add_argument('--name', required=True, help='results name under --out')
+  p.add_argument('--config', required=True, help='gin config (a *_renerf.gin)')
+  p.add_argument('--gin_bindings', action='append', default=[])
+  p.add_argument('--data_dir', help='shortcut for Config.data_dir')
+  p.add_argument('--scene', help='shortcut for Config.scene')
+  p.add_argument('--rounds', type=int, default=default_rounds,
+                 help='rounds after the baseline (a variant binding Config.num_rounds '
+                      'keeps its own)')
+  p.add_argument('--variant', action='append', default=[],
+                 help='LABEL=binding;binding (empty: the config as is); replaces the '
+                      "script's variants")
+  p.add_argument('--seeds', type=int, nargs='+', default=[0, 1, 2])
+  p.add_argument('--baseline_from', default=None,
+                 help='run directory template with {seed}, e.g. experiments/results/'
+                      'fern_rounds_fast/Re-Nerfing/seed{seed}: take round_0 from there '
+                      'when its baseline config matches')
+  p.add_argument('--out', default='experiments/results')
+  return p
+
+
+def bindings_of(args):
+  bindings = list(args.gin_bindings)
+  if args.data_dir:
+    bindings.append(f"Config.data_dir='{args.data_dir}'")
+  if args.scene:
+    bindings.append(f"Config.scene='{args.scene}'")
+  return bindings
+
+
+def base_config(args):
+  return load_config([args.config], bindings_of(args))
+
+
+def mean_std(vals):
+  vals = np.asarray(vals, np.float64)
+  return float(vals.mean()), (float(vals.std(ddof=1)) if len(vals) > 1 else 0.)
+
+
+def round_name(r):
+  return 'baseline' if r == 0 else f'R{r}'
+
+
+def curve_of(run_dir, rounds):
+  """(cumulative seconds, cheap test PSNR) over the rounds of one run."""
+  pts = []
+  for r in range(rounds + 1):
+    path = os.path.join(renerf.round_dir(run_dir, r), 'result.json')
+    pts += [(c['time'], c['eval_psnr']) for c in report.read_json(path)['curve']]
+  return pts
+
+
+def run_seed(config, scene, run_dir, share_from=()):
+  """Rounds of one (variant, seed); round_0 copied from a matching finished run if any.
+
+  Returns:
+    (list of per-round metrics, the run directory round_0 was copied from or None).
+  """
+  cli.check_run_dir(config, run_dir, create=True)
+  copied = None
+  if not os.path.exists(renerf.round_dir(run_dir, 0)):
+    for src in share_from:
+      cfg_path = os.path.join(src, 'config.json')
+      if (os.path.abspath(src) != os.path.abspath(run_dir)
+          and rundir.is_done(renerf.round_dir(src, 0)) and os.path.isfile(cfg_path)
+          and not renerf.baseline_differences(config, report.read_json(cfg_path))):
+        renerf.copy_baseline(config, src, run_dir)
+        copied = src
+        break
+  elif os.path.isfile(os.path.join(run_dir, 'shared_baseline.json')):
+    copied = report.read_json(os.path.join(run_dir, 'shared_baseline.json'))['from']
+  if copied:
+    report.write_json(os.path.join(run_dir, 'shared_baseline.json'), {'from': copied})
+  state = renerf.run_rounds(config, scene, run_dir)
+  return list(state.metrics), copied
+
+
+def summarize(label, runs, rounds):
+  """Rows (one per round) of mean +- std over seeds."""
+  rows = []
+  for r in range(rounds + 1):
+    ms = [run[r] for run in runs]
+    row = {'variant': label, 'round': round_name(r), 'seeds': len(ms)}
+    for k in METRICS + ('cumulative_seconds',):
+      if all(k in m for m in ms):  # lpips_vgg is absent when Config.lpips_nets omits it
+        row[k], row[k + '_std'] = mean_std([m[k] for m in ms])
+    rows.append(row)
+  return rows
+
+
+def equal_time_steps(root, config, runs, run_dirs):
+  """Fixed step count of the equal-total-time baseline (computed once, then reused)."""
+  path = os.path.join(root, 'equal_time.json')
+  if os.path.isfile(path):
+    return report.read_json(path)['max_steps']
+  per_seed = [m[-1]['cumulative_seconds'] / (m[0]['round_seconds'] / config.max_steps)
+              for m in runs]
+  steps = int(round(float(np.median(per_seed))))
+  report.write_json(path, {'max_steps': steps, 'per_seed_steps': per_seed,
+                           'from_runs': run_dirs,
+                           'rule': 'median over seeds of cumulative seconds of the '
+                                   'rounds / baseline seconds per step'})
+  return steps
+
+
+def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
+  """Runs every variant for every seed and writes the table.
+
+  Args:
+    args: parsed arguments of parser().
+    variants: list of 'LABEL=binding;binding'.
+    paper: optional {(variant label or '*', round name): (PSNR, SSIM, LPIPS)}.
+    equal_time: also train the baseline for the total time of the first variant's rounds.
+    paper_note: a sentence on where the paper's numbers come from (or why they are absent).
+
+  Returns:
+    The results dict written to <out>/<name>.json.
+  """
+  bindings = bindings_of(args)
+  root = os.path.join(args.out, args.name)
+  results = {'name': args.name, 'config': args.config, 'bindings': bindings,
+             'seeds': args.seeds, 'variants': [], 'command': 'python ' + shlex.join(sys.argv)}
+  rows, curves, shared_rows = [], {}, set()
+  first_runs = None
+  for vi, spec in enumerate(variants):
+    label, _, extra = spec.partition('=')
+    extra = [b for b in extra.split(';') if b.strip()]
+    config = load_config([args.config], bindings + extra)
+    if not any(b.replace(' ', '').startswith('Config.num_rounds=') for b in extra):
+      config = dataclasses.replace(config, num_rounds=args.rounds)
+    scene = load_scene(config)
+    runs, dirs, copied = [], [], []
+    for seed in args.seeds:
+      run_dir = os.path.join(root, label, f'seed{seed}')
+      share = [os.path.join(root, v.partition('=')[0], f'seed{seed}') for v in variants[:vi]]
+      if args.baseline_from:
+        share.append(args.baseline_from.format(seed=seed))
+      metrics, src = run_seed(dataclasses.replace(config, seed=seed), scene, run_dir, share)
+      runs.append(metrics)
+      dirs.append(run_dir)
+      copied.append(src)
+      curves[f'{label} seed {seed}'] = curve_of(run_dir, config.num_rounds)
+    results['variants'].append({'label': label, 'bindings': extra, 'runs': runs,
+                                'run_dirs': dirs, 'baseline_copied_from': copied})
+    vrows = summarize(label, runs, config.num_rounds)
+    # A baseline copied from an earlier variant of this table is that variant's row.
+    if vi > 0 and all(c and os.path.abspath(c).startswith(os.path.abspath(root) + os.sep)
+                      for c in copied):
+      shared_rows.add(label)
+      vrows = vrows[1:]
+    rows += vrows
+    if first_runs is None:
+      first_runs, first = runs, (config, scene, dirs)
+
+  if equal_time:
+    config, scene, dirs = first
+    steps = equal_time_steps(root, config, first_runs, dirs)
+    runs = []
+    for seed in args.seeds:
+      cfg = dataclasses.replace(config, seed=seed, num_rounds=0, max_steps=steps)
+      eq_dir = os.path.join(root, 'equal_time_baseline', f'seed{seed}')
+      runs.append(run_seed(cfg, scene, eq_dir)[0])
+      curves[f'baseline {steps} steps seed {seed}'] = curve_of(eq_dir, 0)
+    results['equal_time'] = {'max_steps': steps, 'runs': runs}
+    row = summarize('baseline, equal total time', runs, 0)[0]
+    row['round'] = f'{steps} steps'
+    rows.append(row)
+
+  results['rows'] = rows
+  report.write_json(os.path.join(args.out, args.name + '.json'), results)
+  text = markdown(args, rows, paper or {}, shared_rows, paper_note, results['command'])
+  report.write_markdown(os.path.join(args.out, args.name + '.md'), text)
+  report.plot_error_vs_time(curves, os.path.join(args.out, args.name + '_time.png'),
+                            metric='psnr',
+                            title=f'{args.name}: test PSNR vs cumulative seconds')
+  print(text)
+  return results
+
+
+def markdown(args, rows, paper, shared_rows, paper_note, command):
+  """The table: mean +- std per row, dPSNR against the first row, the paper beside."""
+  metrics = [k for k in METRICS if k in rows[0]]
+  base = rows[0]
+  table = []
+  for row in rows:
+    out = {'variant': row['variant'], 'round': row['round']}
+    for k in metrics:
+      out[k] = f"{row[k]:.3f} +- {row[k + '_std']:.3f}" if k in row else ''
+    out['time'] = f"{row['cumulative_seconds']:.0f}"
+    if row is not base:
+      gain = row['psnr'] - base['psnr']
+      out['gain'] = f'{gain:+.2f}' + (' *' if abs(gain) > max(base['psnr_std'],
+                                                              row['psnr_std']) else '')
+    ref = paper.get((row['variant'], row['round'])) or paper.get(('*', row['round']))
+    out['paper'] = ' / '.join(f'{v:g}' for v in ref) if ref else ''
+    table.append(out)
+  cols = ([('variant', 'variant'), ('round', 'round')] + [(k, NAMES[k]) for k in metrics]
+          + [('time', 'cum. s'), ('gain', 'dPSNR')]
+          + ([('paper', 'paper PSNR / SSIM / LPIPS')] if paper else []))
+  shared = (f" The baseline row stands for the baseline of {', '.join(sorted(shared_rows))} "
+            f'too (copied, the same model).' if shared_rows else '')
+  return (f'# {args.name}\n\nConfig `{args.config}` {bindings_of(args)}, seeds {args.seeds}; '
+          f'mean +- std over seeds (fixed step counts per round). cum. s: cumulative wall '
+          f'seconds (training + pseudo-views + uncertainty). dPSNR: against the first row; '
+          f'* = larger than the seed spread (the larger std of the two rows); a gain '
+          f'without * is no gain.{shared} {paper_note}\n\n'
+          + report.markdown_table(table, cols) + f'\n\nCommand:\n\n    {command}\n')

@@ -1,0 +1,72 @@
+"""The paper-table machinery (experiments/tables.py) end to end on the embedded scene."""
+import json
+import subprocess
+import sys
+
+import imageio.v3 as iio
+
+from conftest import REPO
+
+TINY = ['Config.procedural_size = (32, 40)', 'Config.max_steps = 12',
+        'Config.batch_size = 64', 'Config.num_samples = 8', 'Config.net_depth = 2',
+        'Config.net_width = 32', 'Config.skip_layer = 1', 'Config.net_width_viewdirs = 16',
+        'Config.max_deg_point = 4', 'Config.deg_view = 2', 'Config.n_random_poses = 50',
+        'Config.batch_size_random = 64', 'Config.patch_size = 4', 'Config.pseudo_until = 6',
+        'Config.eval_every = 6', 'Config.eval_stride = 4', 'Config.checkpoint_every = 6',
+        'Config.render_chunk = 512', "Config.lpips_nets = ('alex',)",
+        "Config.interp_factors = '2x'"]
+
+
+def _run(script, out, *extra):
+  cmd = ([sys.executable, f'experiments/{script}', '--config', 'gin_configs/demo.gin',
+          '--out', str(out), '--seeds', '0', '1'] + [f'--gin_bindings={b}' for b in TINY]
+         + list(extra))
+  res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
+                       check=False)
+  assert res.returncode == 0, res.stderr[-3000:]
+  return res.stdout
+
+
+def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_path):
+  out = tmp_path / 'results'
+  _run('renerf_rounds.py', out, '--name', 't1', '--rounds', '1')
+  t1 = json.loads((out / 't1.json').read_text())
+  rows = t1['rows']
+  assert [r['round'] for r in rows[:2]] == ['baseline', 'R1']
+  eq = json.loads((out / 't1' / 'equal_time.json').read_text())
+  # Two rounds of 12 steps plus pseudo-view synthesis: more than 24 steps' worth of time.
+  assert eq['max_steps'] > 24 and rows[2]['round'] == f"{eq['max_steps']} steps"
+  assert rows[0]['seeds'] == 2 and rows[0]['psnr_std'] > 0  # two different seeds
+  assert (out / 't1.md').read_text().count('19.08') == 1  # the paper's baseline beside ours
+  assert (out / 't1_time.png').stat().st_size > 0
+
+  # A masks-style ablation reusing t1's baselines: no baseline is trained again, and every
+  # variant's round_0 is a bit-for-bit copy.
+  stdout = _run('table_masks.py', out, '--name', 't4',
+                '--baseline_from', str(out / 't1' / 'Re-Nerfing' / 'seed{seed}'),
+                '--gin_bindings=Config.deform_log2_res = 2',
+                '--gin_bindings=Config.hessian_rays = 256')
+  t4 = json.loads((out / 't4.json').read_text())
+  base = {s: (out / 't1' / 'Re-Nerfing' / f'seed{s}' / 'round_0' / 'params.msgpack')
+          .read_bytes() for s in (0, 1)}
+  for v in t4['variants']:
+    assert all(c for c in v['baseline_copied_from'])
+    for s, d in zip((0, 1), v['run_dirs']):
+      assert (REPO / d / 'round_0' / 'params.msgpack').read_bytes() == base[s]
+  assert [r['variant'] for r in t4['rows']] == [
+      'augmented views', 'augmented views', 'stop aug. views', '+ masks']
+  assert t4['rows'][0]['psnr'] == rows[0]['psnr']  # the same baselines
+  masks_log = (out / 't4' / '+ masks' / 'seed0' / 'round_1' / 'pseudo_views' / 'timing.json')
+  assert 'uncertainty_seconds' in json.loads(masks_log.read_text())
+  assert '| + masks | R1 |' in stdout
+  # The camera-path video of the baseline against the last round.
+  gif = out / 'video.gif'
+  cmd = [sys.executable, 'experiments/render_video.py', '--run_dir',
+         str(out / 't1' / 'Re-Nerfing' / 'seed0'), '--config', 'gin_configs/demo.gin',
+         '--frames', '4', '--out', str(gif)] + [f'--gin_bindings={b}' for b in TINY]
+  res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300,
+                       check=False)
+  assert res.returncode == 0, res.stderr[-3000:]
+  frames = iio.imread(gif, index=None)
+  assert frames.shape == (4, 16, 2 * 20 + 4, 3)  # 32x40 at 1/2, two rounds side by side
+  assert 'rounds 0 | 1' in res.stdout and (out / 'video_frame.png').is_file()
