@@ -81,10 +81,11 @@ def main():
   scene = load_scene(config)
   small = downscaled(scene, args.downscale)
   path = pose_lib.camera_path(scene.poses, args.frames).astype(np.float32)
+  all_rays = camera_rays(small, None, path)  # [frames, h, w]: one compilation
   frames = []
   bar = progress_bar(total=len(path), desc='video', unit='frame')
-  for pose in path:
-    rays = jax.tree_util.tree_map(lambda x: x[0], camera_rays(small, None, pose[None]))
+  for i in range(len(path)):
+    rays = jax.tree_util.tree_map(lambda x, i=i: x[i], all_rays)
     imgs = [render_image(config, prm, rays)['rgb'] for prm in params]
     gap = np.ones((small.height, 4, 3), np.float32)
     frames.append(report.to_uint8(np.concatenate([imgs[0], gap, imgs[1]], 1)))
