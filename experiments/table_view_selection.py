@@ -28,8 +28,8 @@ FACTORS = ('7x', '2x', '3x', '3x_b', '3x_c', '4x', '5x', '11x')
 def variants(n_test):
   return ([f"{f}=Config.interp_factors='{f}'" for f in FACTORS]
           + [f"{n_test} test poses=Config.pseudo_targets='test'",
-             f"{n_test} random poses=Config.pseudo_targets='random';"
-             f'Config.pseudo_n_random={n_test}'])
+             (f"{n_test} random poses=Config.pseudo_targets='random';"
+              f'Config.pseudo_n_random={n_test}')])
 
 
 def main():

@@ -137,7 +137,7 @@ def equal_time_steps(root, config, runs, run_dirs):
     return report.read_json(path)['max_steps']
   per_seed = [m[-1]['cumulative_seconds'] / (m[0]['round_seconds'] / config.max_steps)
               for m in runs]
-  steps = int(round(float(np.median(per_seed))))
+  steps = round(float(np.median(per_seed)))
   report.write_json(path, {'max_steps': steps, 'per_seed_steps': per_seed,
                            'from_runs': run_dirs,
                            'rule': 'median over seeds of cumulative seconds of the '
