@@ -3,9 +3,12 @@
 Baseline, R1, R2, R3 (each round a model trained from scratch on the real views plus the
 previous round's pseudo-views), and the baseline trained for the same total wall time as
 the rounds (the control that tells "more compute" from "Re-Nerfing"). Mean +- std over
-seeds with a fixed step count per round. Fern, CPU, fast grid backbone: about 3.5-4 hours
-on 2 cores (per seed ~38 min for the four trainings and three pseudo-view syntheses,
-measured with the CPU partly shared; the equal-time baselines as long again):
+seeds with a fixed step count per round. Fern, CPU, fast grid backbone, estimated from
+the idle-CPU rates of benchmarks/results/throughput.md (a 650-step training ~3.5 min plus
+~1 min of evaluation, 12 pseudo-views ~2.4 min): ~25 min per seed, ~75 min for 3 seeds,
+and the equal-time baselines as long again. fern_rounds_fast was made before the lr change
+of llff3_fast.gin (and before the 2.7x faster grid renderer: ~38 min per seed); to resume
+or reuse it add --gin_bindings "Config.lr_final = 1e-3".
 
   python experiments/renerf_rounds.py --name fern_rounds_fast \
     --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \

@@ -5,8 +5,11 @@ views", Config.pseudo_schedule='all'), removed at step K ("stop aug. views", the
 and removed at K with the Laplace-uncertainty masks ("+ masks", Config.use_masks=True:
 the Hessian pass runs and the most uncertain pixels are left out of the loss). The three
 variants share one baseline per seed (taken from the rounds table with --baseline_from).
-Fern, CPU, fast grid backbone: nine rounds of ~12 min (pseudo-views ~5 min + training
-~5 min, plus the Hessian pass for '+ masks'), so about 2 hours with the baselines reused:
+Fern, CPU, fast grid backbone, estimated from the idle-CPU rates of
+benchmarks/results/throughput.md: nine rounds of ~7 min (pseudo-views ~2.4 min, training
+and evaluation ~4.5 min, plus a ~50 s Hessian pass for '+ masks'), about 65 min with the
+baselines reused from a rounds table made with the same --config (for fern_rounds_fast,
+made before llff3_fast.gin's lr change, add --gin_bindings "Config.lr_final = 1e-3"):
 
   python experiments/table_masks.py --name fern_masks_fast \
     --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \

@@ -6,8 +6,10 @@ Round 1 variants on top of one shared baseline per seed:
   no reset              D continues from B's parameters (pseudo-views until K)
   reset + keep views    pseudo-views kept to the end (Config.pseudo_schedule='all')
   reset + add late      pseudo-views only in the last K steps ('late')
-Fern, CPU, fast grid backbone: twelve rounds of ~12 min and three 2x-long baselines of
-~10 min, so about 3 hours with the baselines reused:
+Fern, CPU, fast grid backbone, estimated from the idle-CPU rates of
+benchmarks/results/throughput.md: twelve rounds of ~7 min and three 2x-long baselines of
+~8 min, about 1.8 hours with the baselines reused (from a rounds table made with the same
+--config; see table_masks.py):
 
   python experiments/table_why.py --name fern_why_fast \
     --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \

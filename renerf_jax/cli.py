@@ -7,9 +7,10 @@ from renerf_jax.configs import config_to_gin, default_run_dir, load_config, pars
 from renerf_jax.errors import RunDirError
 
 # Fields that may change between invocations on one run directory without invalidating
-# what it holds (more rounds, logging and rendering knobs).
-RESUMABLE_FIELDS = ('num_rounds', 'print_every', 'render_chunk', 'eval_n_views',
-                    'eval_every', 'eval_stride', 'checkpoint_every', 'lpips_nets')
+# what it holds (more rounds, logging and rendering knobs, the Hessian pass's chunking).
+RESUMABLE_FIELDS = ('num_rounds', 'print_every', 'render_chunk', 'hessian_chunk',
+                    'eval_n_views', 'eval_every', 'eval_stride', 'checkpoint_every',
+                    'lpips_nets')
 
 
 def setup(argv, description):

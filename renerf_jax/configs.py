@@ -116,6 +116,7 @@ class Config:
   deform_log2_res: int = 8  # L: the deformation grid has (2^L + 1)^3 vertices.
   hessian_rays: int = 65536  # R: training rays in the Hessian pass.
   hessian_lambda: float = 1e-4  # Prior precision lambda (keeps Sigma finite).
+  hessian_chunk: int = 1024  # Rays per jitted chunk of the Hessian pass (memory vs speed).
   mask_keep_frac: float = 0.8  # Keep this fraction of pseudo pixels (mu by bisection)...
   mask_threshold: float = -1.  # ... unless >= 0: absolute mu on the uncertainty.
   # --- logging, evaluation, checkpoints ---
@@ -146,6 +147,8 @@ class Config:
     _check(self.n_input_views >= 1, f'Config.n_input_views={self.n_input_views} must be >= 1')
     _check(self.far >= self.near, f'Config.far={self.far} < Config.near={self.near}')
     _check(self.factor >= 1, f'Config.factor={self.factor} must be >= 1')
+    _check(self.hessian_chunk >= 1, f'Config.hessian_chunk={self.hessian_chunk} must be >= 1')
+    _check(self.render_chunk >= 1, f'Config.render_chunk={self.render_chunk} must be >= 1')
 
 
 class _DropGinPathProbe(logging.Filter):

@@ -118,10 +118,26 @@ def save_pseudo_views(directory, pv: PseudoViews, meta, save_png=True):
       report.save_image_png(os.path.join(directory, f'mask_{i:03d}.png'),
                             arrays['masks'][i])
       if np.any(arrays['uncertainty'][i]):
-        heat = report.colorize(arrays['uncertainty'][i])
+        heat = uncertainty_heatmap(arrays['uncertainty'][i], arrays['uncertainty'])
         report.save_image_png(os.path.join(directory, f'uncertainty_{i:03d}.png'), heat)
         report.save_image_png(os.path.join(directory, f'panel_{i:03d}.png'),
                               side_by_side(arrays['images'][i], heat, arrays['masks'][i]))
+
+
+def uncertainty_heatmap(u, ref=None):
+  """[H, W, 3] turbo heat-map of U, coloured by each pixel's quantile of U in `ref`
+  (default u; pass all views to share one scale): histogram-equalised. U often clusters
+  just below the prior sigma (vertices seen by few rays), where a linear or log scale
+  shows one colour; the quantile shows the ordering that a keep-fraction threshold uses.
+  Non-finite U is drawn black."""
+  u = np.asarray(u, np.float64)
+  ref = np.asarray(u if ref is None else ref, np.float64).reshape(-1)
+  ref = np.sort(ref[np.isfinite(ref)])
+  q = np.full(u.shape, np.nan)
+  ok = np.isfinite(u)
+  if ref.size:
+    q[ok] = np.searchsorted(ref, u[ok], side='right') / ref.size
+  return report.colorize(q, lo=0., hi=1.)
 
 
 def side_by_side(image, heat, mask):

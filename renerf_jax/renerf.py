@@ -82,6 +82,10 @@ def make_pools(config, scene, pseudo: Optional[PseudoViews]):
 def synthesize(config, scene, params, out_dir, show_progress=True):
   """Pseudo-views of model `params` (with uncertainty masks if config.use_masks).
 
+  With masks, the Hessian pass runs first and the colours and the uncertainty of the
+  pseudo-views come out of one render pass. timing.json records render_seconds (the
+  render pass, with masks including U and the threshold) and, with masks,
+  hessian_seconds (the extra work of the masks), mu and kept_fraction.
   Cached in out_dir (views.npz written atomically), so a resumed round reuses them.
 
   Returns:
@@ -93,32 +97,37 @@ def synthesize(config, scene, params, out_dir, show_progress=True):
     return cached, float(report.read_json(info_path)['seconds'])
   t0 = time.perf_counter()
   poses, meta = pseudo_view_poses(config, scene)
-  pv = render_pseudo_views(config, scene, params, poses, show_progress)
-  timing = {'render_seconds': time.perf_counter() - t0}
   if config.use_masks:
-    t1 = time.perf_counter()
-    pv, mu = mask_pseudo_views(config, scene, params, pv)
-    timing.update(uncertainty_seconds=time.perf_counter() - t1, mu=float(mu),
-                  kept_fraction=float(np.mean(pv.masks)))
+    pv, timing = masked_pseudo_views(config, scene, params, poses, show_progress)
+  else:
+    pv = render_pseudo_views(config, scene, params, poses, show_progress)
+    timing = {'render_seconds': time.perf_counter() - t0}
   timing['seconds'] = time.perf_counter() - t0
   save_pseudo_views(out_dir, pv, meta)
   report.write_json(info_path, timing)
   return pv, timing['seconds']
 
 
-def mask_pseudo_views(config, scene, params, pv: PseudoViews):
-  """Adds Laplace-uncertainty masks to pseudo-views (pixels with U > mu masked).
+def masked_pseudo_views(config, scene, params, poses, show_progress=False):
+  """Pseudo-views at `poses` with Laplace-uncertainty masks (pixels with U > mu masked).
 
   Returns:
-    (PseudoViews with masks and uncertainty, mu).
+    (PseudoViews with masks and uncertainty, timing dict).
   """
   from renerf_jax import uncertainty  # pylint: disable=g-import-not-at-top
+  t0 = time.perf_counter()
   lo, hi = scene.bbox
-  u, mask, mu = uncertainty.compute_masks(
-      config, params, ray_pool(scene, scene.train_idx)['rays'],
-      camera_rays(scene, None, pv.poses), np.asarray(lo), np.asarray(hi))
-  return pv.replace(masks=np.asarray(mask, np.float32),
-                    uncertainty=np.asarray(u, np.float32)), mu
+  rays = camera_rays(scene, None, poses)
+  res = uncertainty.compute_masks(config, params, ray_pool(scene, scene.train_idx)['rays'],
+                                  rays, np.asarray(lo), np.asarray(hi),
+                                  show_progress=show_progress)
+  total = time.perf_counter() - t0
+  pv = PseudoViews(images=np.clip(res.rgb, 0., 1.), poses=np.asarray(poses),
+                   masks=np.asarray(res.mask, np.float32),
+                   uncertainty=np.asarray(res.uncertainty, np.float32))
+  render_seconds = total - res.hessian_seconds
+  return pv, {'render_seconds': render_seconds, 'hessian_seconds': res.hessian_seconds,
+              'mu': float(res.mu), 'kept_fraction': float(np.mean(pv.masks))}
 
 
 def round_config(config, r):
@@ -192,8 +201,8 @@ def check_rounds_config(config, scene):
 ROUND_FIELDS = ('num_rounds', 'pseudo_frac', 'pseudo_until', 'pseudo_schedule',
                 'renerf_init', 'interp_factors', 'sequencing', 'pseudo_targets',
                 'pseudo_n_random', 'use_masks', 'deform_log2_res', 'hessian_rays',
-                'hessian_lambda', 'mask_keep_frac', 'mask_threshold', 'checkpoint_every',
-                'render_chunk')
+                'hessian_lambda', 'hessian_chunk', 'mask_keep_frac', 'mask_threshold',
+                'checkpoint_every', 'render_chunk')
 
 
 def baseline_differences(config, saved_config: dict):

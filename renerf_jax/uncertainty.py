@@ -29,7 +29,8 @@ Conventions used throughout:
 """
 import dataclasses
 import functools
-from typing import Optional, Tuple
+import time
+from typing import NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -37,7 +38,8 @@ import jaxopt
 import numpy as np
 
 from renerf_jax import mip
-from renerf_jax.model import render_rays
+from renerf_jax.model import materialize, render_rays
+from renerf_jax.progress import progress_bar
 
 # Corner offsets of a cell, in the order of the flattened vertex index (x-major).
 _CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], np.int32)
@@ -250,7 +252,7 @@ def _chunk_indices(num: int, start: int, chunk: int):
 
 
 def hessian_diagonal(config, params, rays, lo, hi, log2_res: int, lam: float,
-                     chunk: int = 1024):
+                     chunk: int = 1024, show_progress: bool = False):
   """Gauss-Newton / Laplace diagonal of the Hessian w.r.t. the deformation grid.
 
   diag(H) = 2 / R sum_r sum_levels diag(J_r^T J_r) + 2 lam, at the trained model
@@ -271,6 +273,7 @@ def hessian_diagonal(config, params, rays, lo, hi, log2_res: int, lam: float,
     log2_res: L; the grid has (2^L + 1)^3 vertices.
     lam: prior precision lambda > 0.
     chunk: rays per jitted chunk (static; the last chunk is padded with zero weight).
+    show_progress: draw a bar (rays, rate, ETA).
 
   Returns:
     [(2^L + 1)^3, 3] float32 diagonal (x-major vertex order, xyz offset axes).
@@ -282,11 +285,14 @@ def hessian_diagonal(config, params, rays, lo, hi, log2_res: int, lam: float,
   hi = jnp.asarray(hi, jnp.float32) * jnp.ones(3, jnp.float32)
   total = jnp.zeros((grid_size(log2_res), 3), jnp.float32)
   comp = jnp.zeros_like(total)
+  bar = progress_bar(total=num, desc='Hessian', disable=not show_progress, unit='ray')
   for start in range(0, num, chunk):
     idx, valid = _chunk_indices(num, start, chunk)
     part = jax.tree_util.tree_map(lambda x, idx=idx: jnp.take(x, idx, axis=0), rays)
     total, comp = _hessian_chunk(cfg, log2_res, params, part, jnp.asarray(valid), lo, hi,
                                  total, comp)
+    bar.update(int(valid.sum()))
+  bar.close()
   return (2. / num) * (total - comp) + 2. * lam
 
 
@@ -364,6 +370,7 @@ def _uncertainty_chunk(config, params, sigma, rays, lo, hi, u_bg):
   fine = render_rays(config, params, rays, jax.random.PRNGKey(0), train=False)[-1]
   means, _ = mip.cast_rays(fine['t_vals'], rays.origins, rays.directions, rays.radii,
                            config.ray_shape)
+  means = materialize(means)  # Computed once, not once per trilinear corner.
   u_points = trilinear(sigma[:, None], means, lo, hi)[..., 0]  # [B, S]
   u = jnp.sum(fine['weights'] * u_points, axis=-1)
   u = u + jnp.clip(1. - fine['acc'], 0., 1.) * u_bg
@@ -371,8 +378,11 @@ def _uncertainty_chunk(config, params, sigma, rays, lo, hi, u_bg):
 
 
 def render_uncertainty(config, params, sigma, rays, lo, hi, chunk: int = 4096,
-                       u_bg: Optional[float] = None, log_scale: bool = False):
+                       u_bg: Optional[float] = None, log_scale: bool = False,
+                       show_progress: bool = False, desc: str = 'uncertainty'):
   """Per-ray uncertainty U = sum_i w_i U(x_i) + (1 - acc) U_bg over the fine level.
+
+  The colour comes out of the same pass, so pseudo-views with masks cost one render.
 
   Args:
     config: Config. params: field parameters.
@@ -385,6 +395,7 @@ def render_uncertainty(config, params, sigma, rays, lo, hi, chunk: int = 4096,
       prior_sigma(lambda) to make it explicit).
     log_scale: return log U (Bayes' Rays visualises / thresholds log U; a keep-fraction
       threshold is the same either way, an absolute one is not).
+    show_progress: draw a bar (rays, rate, ETA). desc: its label.
 
   Returns:
     (u [N], rgb [N, 3]) host numpy float32 arrays.
@@ -397,6 +408,7 @@ def render_uncertainty(config, params, sigma, rays, lo, hi, chunk: int = 4096,
   lo = jnp.asarray(lo, jnp.float32) * jnp.ones(3, jnp.float32)
   hi = jnp.asarray(hi, jnp.float32) * jnp.ones(3, jnp.float32)
   us, rgbs = [], []
+  bar = progress_bar(total=num, desc=desc, disable=not show_progress, unit='ray')
   for start in range(0, num, chunk):
     idx, valid = _chunk_indices(num, start, chunk)
     part = jax.tree_util.tree_map(lambda x, idx=idx: jnp.take(x, idx, axis=0), rays)
@@ -405,6 +417,8 @@ def render_uncertainty(config, params, sigma, rays, lo, hi, chunk: int = 4096,
     m = int(valid.sum())
     us.append(np.asarray(u[:m]))
     rgbs.append(np.asarray(rgb[:m]))
+    bar.update(m)
+  bar.close()
   u = np.concatenate(us)
   if log_scale:
     u = np.log(np.maximum(u, np.finfo(np.float32).tiny))
@@ -479,36 +493,55 @@ def subsample_rays(rays, num: int, seed: int):
   return jax.tree_util.tree_map(lambda x: jnp.take(x, idx, axis=0), rays)
 
 
+class Masks(NamedTuple):
+  """Result of compute_masks (host numpy arrays shaped like the pseudo rays)."""
+  uncertainty: np.ndarray  # [...] rendered U.
+  mask: np.ndarray  # [...] 1 keeps a pixel, 0 masks it.
+  mu: float  # The threshold.
+  rgb: np.ndarray  # [..., 3] the fine colour, rendered in the same pass as U.
+  hessian_seconds: float  # Wall time of the Hessian pass.
+
+
 def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
-                  hessian_chunk: int = 1024) -> Tuple[np.ndarray, np.ndarray, float]:
+                  hessian_chunk: Optional[int] = None, show_progress: bool = False) -> Masks:
   """Uncertainty masks of pseudo-view pixels (the Re-Nerfing + Bayes' Rays step).
 
   Uses config.deform_log2_res, config.hessian_rays (training rays drawn with
   config.seed), config.hessian_lambda, config.mask_threshold (>= 0: absolute mu) or else
   config.mask_keep_frac (mu by bisection), and config.render_chunk. U_bg is the prior
-  sigma sqrt(3 / (2 lambda)).
+  sigma sqrt(3 / (2 lambda)). The pseudo-view colours come out of the uncertainty render,
+  so masked pseudo-views cost the Hessian pass plus one render, not two renders.
 
   Args:
     config: Config. params: trained field parameters.
     train_rays: Rays of the training pool (any leading shape; flattened).
-    pseudo_rays: Rays of the pseudo-view pixels, leading shape [...] (e.g. [M]).
+    pseudo_rays: Rays of the pseudo-view pixels, leading shape [...] (e.g. [M, H, W]).
     lo, hi: [3] box of the deformation grid.
-    hessian_chunk: rays per chunk of the Hessian pass.
+    hessian_chunk: rays per chunk of the Hessian pass (default config.hessian_chunk).
+    show_progress: draw bars over the Hessian rays and the pseudo rays.
 
   Returns:
-    (uncertainty [...] float32, mask [...] float32 (1 keep), mu float).
+    Masks.
   """
   flat = lambda r: jax.tree_util.tree_map(lambda x: x.reshape((-1, x.shape[-1])), r)
   shape = pseudo_rays.origins.shape[:-1]
   train = subsample_rays(flat(train_rays), config.hessian_rays, config.seed)
   lam = config.hessian_lambda
-  h_diag = hessian_diagonal(config, params, train, lo, hi, config.deform_log2_res, lam,
-                            chunk=hessian_chunk)
-  u, _ = render_uncertainty(config, params, vertex_sigma(h_diag), flat(pseudo_rays), lo, hi,
-                            chunk=config.render_chunk, u_bg=prior_sigma(lam))
+  t0 = time.perf_counter()
+  h_diag = jax.block_until_ready(hessian_diagonal(
+      config, params, train, lo, hi, config.deform_log2_res, lam,
+      chunk=hessian_chunk or config.hessian_chunk,
+      show_progress=show_progress))
+  hessian_seconds = time.perf_counter() - t0
+  u, rgb = render_uncertainty(config, params, vertex_sigma(h_diag), flat(pseudo_rays), lo,
+                              hi, chunk=config.render_chunk, u_bg=prior_sigma(lam),
+                              show_progress=show_progress,
+                              desc=(f'pseudo-views + uncertainty ({shape[0]})'
+                                    if len(shape) == 3 else 'uncertainty'))
   if config.mask_threshold >= 0:
     mu = float(config.mask_threshold)
   else:
     mu = threshold_for_keep_fraction(u, config.mask_keep_frac)
   mask = np.asarray(masks_from_uncertainty(u, mu))
-  return u.reshape(shape), mask.reshape(shape), mu
+  return Masks(uncertainty=u.reshape(shape), mask=mask.reshape(shape), mu=float(mu),
+               rgb=rgb.reshape(shape + (3,)), hessian_seconds=hessian_seconds)

@@ -52,6 +52,9 @@ def test_missing_config_file():
 def test_bad_value_names_the_field():
   with pytest.raises(ConfigError, match='ray_shape'):
     load_config([], ["Config.ray_shape = 'sphere'"])
+  for field in ('hessian_chunk', 'render_chunk'):
+    with pytest.raises(ConfigError, match=f'Config.{field}=0 must be >= 1'):
+      load_config([], [f'Config.{field} = 0'])
 
 
 def test_bindings_do_not_leak_and_config_gin_round_trips(tmp_path):

@@ -129,3 +129,10 @@ def test_run_dir_made_before_a_new_config_field_still_resumes(tmp_path):
   with pytest.raises(Exception, match='grid_box'):
     cli.check_run_dir(dataclasses.replace(config, grid_box=((0., 0., 0.), (1., 1., 1.))),
                       str(tmp_path / 'run'), create=False)
+  # A chunking knob may change on resume (llff3_fast.gin raised hessian_chunk after runs
+  # were made with the default); a field that changes results may not.
+  cli.check_run_dir(dataclasses.replace(config, hessian_chunk=8192, render_chunk=512),
+                    str(tmp_path / 'run'), create=False)
+  with pytest.raises(Exception, match='hessian_rays'):
+    cli.check_run_dir(dataclasses.replace(config, hessian_rays=7), str(tmp_path / 'run'),
+                      create=False)

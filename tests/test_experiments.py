@@ -57,7 +57,7 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
       'augmented views', 'augmented views', 'stop aug. views', '+ masks']
   assert t4['rows'][0]['psnr'] == rows[0]['psnr']  # the same baselines
   masks_log = (out / 't4' / '+ masks' / 'seed0' / 'round_1' / 'pseudo_views' / 'timing.json')
-  assert 'uncertainty_seconds' in json.loads(masks_log.read_text())
+  assert json.loads(masks_log.read_text())['hessian_seconds'] > 0.
   assert '| + masks | R1 |' in stdout
   # The camera-path video of the baseline against the last round.
   gif = out / 'video.gif'
@@ -70,3 +70,36 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   frames = iio.imread(gif, index=None)
   assert frames.shape == (4, 16, 2 * 20 + 4, 3)  # 32x40 at 1/2, two rounds side by side
   assert 'rounds 0 | 1' in res.stdout and (out / 'video_frame.png').is_file()
+  # Uncertainty masks of the baseline's pseudo-views: panel PNG and Hessian share.
+  run0 = out / 't1' / 'Re-Nerfing' / 'seed0'
+  before = sorted(str(f) for f in run0.rglob('*'))
+  cmd = [sys.executable, 'experiments/uncertainty_panel.py', '--run_dir', str(run0),
+         '--config', 'gin_configs/demo.gin', '--work_dir', str(tmp_path / 'masks'),
+         '--views', '0', '1', '--out', str(out / 'unc')] + [
+             f'--gin_bindings={b}' for b in TINY + ['Config.deform_log2_res = 2',
+                                                   'Config.hessian_rays = 128']]
+  res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300,
+                       check=False)
+  assert res.returncode == 0, res.stderr[-3000:]
+  unc = json.loads((out / 'unc.json').read_text())
+  assert unc['hessian_seconds'] > 0. and 0. < unc['hessian_share_of_round'] < 1.
+  assert 0. <= unc['kept_fraction'] <= 1.
+  panel = iio.imread(out / 'unc.png')
+  assert panel.shape[:2] == (2 * 32 + 4, 3 * 40 + 8)  # 2 views; view | heat | masked
+  assert sorted(str(f) for f in run0.rglob('*')) == before  # the run is not written to
+  # Error against time of finished baselines (two 'backbones': the same runs here).
+  runs = str(out / 't1' / 'Re-Nerfing' / 'seed*')
+  cmd = [sys.executable, 'experiments/plot_backbones.py', '--name', 'bb', '--out', str(out),
+         '--run', f'A={runs}', '--run', f'B={runs}', '--sec_per_step', 'A=0.5']
+  res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120,
+                       check=False)
+  assert res.returncode == 0, res.stderr[-3000:]
+  bb = json.loads((out / 'bb.json').read_text())
+  a, b = bb['methods']
+  assert a['curves']['seed0'][-1][0] == 0.5 * 12  # step x the given seconds per step
+  assert b['curves']['seed0'] != a['curves']['seed0']  # B keeps the logged seconds
+  assert '| A | 2 | 12 | 6 |' in (out / 'bb.md').read_text()
+  assert (out / 'bb.png').stat().st_size > 0
+  bad = subprocess.run(cmd[:-2] + ['--sec_per_step', 'C=1'], cwd=REPO, capture_output=True,
+                       text=True, timeout=120, check=False)
+  assert bad.returncode != 0 and 'unknown label' in bad.stderr

@@ -6,7 +6,7 @@ import pytest
 
 from renerf_jax import renerf, rundir
 from renerf_jax.datasets import load_scene
-from renerf_jax.pseudo_views import pseudo_view_poses
+from renerf_jax.pseudo_views import pseudo_view_poses, uncertainty_heatmap
 from renerf_jax.errors import ConfigError
 from conftest import tiny_config
 
@@ -121,3 +121,19 @@ def test_copy_baseline_shares_round_0_between_variants_only(tmp_path):
   with pytest.raises(RunDirError, match='not a finished round'):
     renerf.copy_baseline(variant, str(tmp_path / 'none'), str(tmp_path / 'y'))
   assert not os.path.exists(tmp_path / 'x') and not os.path.exists(tmp_path / 'y')
+
+
+def test_uncertainty_heatmap_shows_the_order_despite_outliers_and_bad_values():
+  # U clustered just below the prior sigma, one huge outlier, a zero, NaN and inf.
+  u = np.full((4, 5), 122.4)
+  u[0, :4] = [120.0, 121.0, 122.0, 122.3]
+  u[1, 0], u[1, 1], u[1, 2], u[1, 3] = 1e30, 0., np.nan, np.inf
+  heat = uncertainty_heatmap(u)
+  assert heat.shape == (4, 5, 3) and np.all(np.isfinite(heat))
+  assert np.all((heat >= 0.) & (heat <= 1.))
+  colours = [tuple(heat[0, i]) for i in range(4)]
+  assert len(set(colours)) == 4  # 120 < 121 < 122 < 122.3 stay distinguishable
+  np.testing.assert_array_equal(heat[1, 2], 0.)  # NaN is drawn black
+  # A shared reference scale: the same U gets the same colour in every view.
+  other = np.full((2, 2), 121.0)
+  np.testing.assert_allclose(uncertainty_heatmap(other, u)[0, 0], heat[0, 1])

@@ -12,6 +12,7 @@ from renerf_jax.configs import Config
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.fields import init_field_params
 from renerf_jax.model import render_rays
+from renerf_jax.rendering import render_flat
 
 LAM = 1e-4
 TINY = Config(dataset_loader='procedural', num_samples=8, net_depth=2, net_width=32,
@@ -197,10 +198,15 @@ def test_compute_masks_end_to_end(setup):
   config = dataclasses.replace(config, deform_log2_res=1, hessian_rays=24,
                                hessian_lambda=LAM, mask_keep_frac=0.5, render_chunk=64)
   pseudo = take(pool['rays'], np.arange(1, 600, 7))  # 86 pixels.
-  u, mask, mu = unc.compute_masks(config, params, pool['rays'], pseudo, -1., 1.,
-                                  hessian_chunk=8)
+  res = unc.compute_masks(config, params, pool['rays'], pseudo, -1., 1., hessian_chunk=8)
+  u, mask, mu = res.uncertainty, res.mask, res.mu
   assert u.shape == mask.shape == (86,)
   assert np.all(np.isfinite(u)) and np.all(u > 0.) and np.all(u <= unc.prior_sigma(LAM))
   assert 0.5 <= mask.mean() <= 0.5 + 1. / 86
   np.testing.assert_array_equal(mask, (u <= mu).astype(np.float32))
   assert np.ptp(u) > 0.  # Pixels differ in uncertainty.
+  # The colours of the same pass are the plain renderer's: masked pseudo-views need one
+  # render, not two.
+  plain = render_flat(config, params, pseudo, chunk=32)['rgb']
+  assert res.rgb.shape == (86, 3) and res.hessian_seconds > 0.
+  np.testing.assert_allclose(res.rgb, plain, atol=1e-5)
