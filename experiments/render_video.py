@@ -21,7 +21,9 @@ import numpy as np
 from flax import serialization
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from renerf_jax import poses as pose_lib  # pylint: disable=g-import-not-at-top
+# pylint: disable=g-import-not-at-top
+from experiments.tables import bindings_of
+from renerf_jax import poses as pose_lib
 from renerf_jax import renerf, report, rundir, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import camera_rays, load_scene
@@ -55,14 +57,26 @@ def downscaled(scene, factor):
                              / scene.height)
 
 
-def main():
-  p = argparse.ArgumentParser(description=__doc__,
+def run_parser(description):
+  """An argument parser with a finished run's flags: --run_dir, --config, --gin_bindings,
+  --data_dir, --scene (the Config comes from run_config)."""
+  p = argparse.ArgumentParser(description=description,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument('--run_dir', required=True)
   p.add_argument('--config', required=True)
   p.add_argument('--gin_bindings', action='append', default=[])
-  p.add_argument('--data_dir')
-  p.add_argument('--scene')
+  p.add_argument('--data_dir', help='shortcut for Config.data_dir')
+  p.add_argument('--scene', help='shortcut for Config.scene')
+  return p
+
+
+def run_config(args):
+  """The Config of run_parser's flags."""
+  return load_config([args.config], bindings_of(args))
+
+
+def main():
+  p = run_parser(__doc__)
   p.add_argument('--rounds', type=int, nargs=2, default=None,
                  help='the two rounds to show (default: 0 and the last finished)')
   p.add_argument('--frames', type=int, default=40)
@@ -70,12 +84,7 @@ def main():
   p.add_argument('--downscale', type=int, default=2)
   p.add_argument('--out', required=True, help='output .gif')
   args = p.parse_args()
-  bindings = list(args.gin_bindings)
-  if args.data_dir:
-    bindings.append(f"Config.data_dir='{args.data_dir}'")
-  if args.scene:
-    bindings.append(f"Config.scene='{args.scene}'")
-  config = load_config([args.config], bindings)
+  config = run_config(args)
   rounds = args.rounds or (0, finished_rounds(args.run_dir) - 1)
   params = [load_params(config, args.run_dir, r) for r in rounds]
   scene = load_scene(config)

@@ -13,7 +13,6 @@ Fern, after renerf_rounds.py:
     --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --work_dir /tmp/fern_masks --out experiments/results/fern_uncertainty
 """
-import argparse
 import dataclasses
 import os
 import sys
@@ -22,32 +21,20 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # pylint: disable=g-import-not-at-top
-from experiments.render_video import load_params
+from experiments.render_video import load_params, run_config, run_parser
 from renerf_jax import renerf, report
-from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.pseudo_views import side_by_side, uncertainty_heatmap
 
 
 def main(argv=None):
-  p = argparse.ArgumentParser(description=__doc__,
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
-  p.add_argument('--run_dir', required=True)
-  p.add_argument('--config', required=True)
-  p.add_argument('--gin_bindings', action='append', default=[])
-  p.add_argument('--data_dir')
-  p.add_argument('--scene')
+  p = run_parser(__doc__)
   p.add_argument('--round', type=int, default=0, help='the model B whose views are masked')
   p.add_argument('--views', type=int, nargs='+', default=[0, 3, 6])
   p.add_argument('--work_dir', required=True, help='pseudo-views with masks go here')
   p.add_argument('--out', required=True, help='output prefix (.png, .json)')
   args = p.parse_args(argv)
-  bindings = list(args.gin_bindings)
-  if args.data_dir:
-    bindings.append(f"Config.data_dir='{args.data_dir}'")
-  if args.scene:
-    bindings.append(f"Config.scene='{args.scene}'")
-  config = dataclasses.replace(load_config([args.config], bindings), use_masks=True)
+  config = dataclasses.replace(run_config(args), use_masks=True)
   if os.path.abspath(args.work_dir).startswith(os.path.abspath(args.run_dir) + os.sep):
     raise SystemExit(f'error: --work_dir {args.work_dir} lies inside --run_dir; '
                      'a finished run is never written to')
