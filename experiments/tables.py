@@ -11,6 +11,9 @@ it is trained once per seed and copied (renerf.copy_baseline) into the other var
 directories, and can be taken from another table's runs with --baseline_from (e.g. the
 rounds table's). A copied baseline is the same model bit for bit, so sharing changes no
 number; its row is shown once.
+Round 1's pseudo-views (and masks) are shared the same way between variants that agree on
+renerf.PSEUDO_VIEW_FIELDS (e.g. the masks table's 'augmented views' and 'stop aug. views'):
+rendered once per seed, the copy keeps their render seconds in the cumulative time.
 
 Optionally (--equal_time) the baseline is also trained for the same total wall time as
 the rounds of the first variant (training + pseudo-view synthesis + uncertainty): a FIXED
@@ -95,6 +98,10 @@ def curve_of(run_dir, rounds):
 def run_seed(config, scene, run_dir, share_from=()):
   """Rounds of one (variant, seed); round_0 copied from a matching finished run if any.
 
+  Round 1's pseudo-views are copied too from a run in share_from with the same baseline
+  and pseudo-view settings (renerf.share_pseudo_views): variants that differ only in how
+  D is trained render them once per seed.
+
   Returns:
     (list of per-round metrics, the run directory round_0 was copied from or None).
   """
@@ -113,6 +120,10 @@ def run_seed(config, scene, run_dir, share_from=()):
     copied = report.read_json(os.path.join(run_dir, 'shared_baseline.json'))['from']
   if copied:
     report.write_json(os.path.join(run_dir, 'shared_baseline.json'), {'from': copied})
+  if config.num_rounds > 0 and rundir.is_done(renerf.round_dir(run_dir, 0)):
+    for src in share_from:  # Round 1's pseudo-views, if another variant made the same.
+      if renerf.share_pseudo_views(config, src, run_dir):
+        break
   state = renerf.run_rounds(config, scene, run_dir)
   return list(state.metrics), copied
 

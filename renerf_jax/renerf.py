@@ -246,6 +246,55 @@ def copy_baseline(config, src_run_dir, dst_run_dir):
   os.replace(tmp, dst)
 
 
+# Config fields (beside the baseline's) that decide round 1's pseudo-views and masks.
+PSEUDO_VIEW_FIELDS = ('interp_factors', 'sequencing', 'pseudo_targets', 'pseudo_n_random',
+                      'use_masks', 'deform_log2_res', 'hessian_rays', 'hessian_lambda',
+                      'hessian_chunk', 'mask_keep_frac', 'mask_threshold')
+
+
+def share_pseudo_views(config, src_run_dir, dst_run_dir):
+  """Copies round 1's pseudo-views from another run that renders the same ones.
+
+  Variants of an ablation that differ only in how D is trained (Config.pseudo_schedule,
+  renerf_init, pseudo_frac, pseudo_until) render the same round-1 pseudo-views from the
+  same baseline. They are copied when both runs have byte-identical round_0 params, the
+  same baseline config and the same PSEUDO_VIEW_FIELDS, src has finished its round-1
+  pseudo-views and dst has not started its own. The copy keeps timing.json, so the
+  cumulative seconds of dst still count the synthesis; copied_from.json names src. It
+  is made in a temp directory and renamed into place.
+
+  Returns:
+    True if copied, False if src does not qualify (nothing is written then).
+  """
+  src = os.path.join(round_dir(src_run_dir, 1), 'pseudo_views')
+  dst_round = round_dir(dst_run_dir, 1)
+  dst = os.path.join(dst_round, 'pseudo_views')
+  cfg_path = os.path.join(src_run_dir, 'config.json')
+  if (os.path.abspath(src_run_dir) == os.path.abspath(dst_run_dir) or os.path.exists(dst)
+      or not all(os.path.isfile(os.path.join(src, f)) for f in ('views.npz', 'timing.json'))
+      or not os.path.isfile(cfg_path)):
+    return False
+  saved = report.read_json(cfg_path)
+  current = report.to_jsonable(dataclasses.asdict(config))
+  defaults = report.to_jsonable(dataclasses.asdict(type(config)()))
+  if baseline_differences(config, saved) or any(
+      saved.get(k, defaults[k]) != current[k] for k in PSEUDO_VIEW_FIELDS):
+    return False
+  params = [os.path.join(round_dir(d, 0), 'params.msgpack') for d in (src_run_dir, dst_run_dir)]
+  if not all(os.path.isfile(p) for p in params):
+    return False
+  with open(params[0], 'rb') as a, open(params[1], 'rb') as b:
+    if a.read() != b.read():
+      return False
+  os.makedirs(dst_round, exist_ok=True)
+  tmp = os.path.join(dst_round, f'.pseudo_views.{os.getpid()}.tmp')
+  shutil.rmtree(tmp, ignore_errors=True)
+  shutil.copytree(src, tmp)
+  report.write_json(os.path.join(tmp, 'copied_from.json'), {'from': os.path.abspath(src)})
+  os.replace(tmp, dst)
+  return True
+
+
 def run_rounds(config, scene, run_dir, show_progress=True) -> RoundState:
   """Baseline plus config.num_rounds Re-Nerfing rounds: the loop of Figure 2."""
   check_rounds_config(config, scene)

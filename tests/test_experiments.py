@@ -58,6 +58,14 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   assert t4['rows'][0]['psnr'] == rows[0]['psnr']  # the same baselines
   masks_log = (out / 't4' / '+ masks' / 'seed0' / 'round_1' / 'pseudo_views' / 'timing.json')
   assert json.loads(masks_log.read_text())['hessian_seconds'] > 0.
+  # 'stop aug. views' reuses the pseudo-views of 'augmented views' (same baseline, same
+  # pseudo-view settings); '+ masks' renders its own.
+  pv = lambda v, s: out / 't4' / v / f'seed{s}' / 'round_1' / 'pseudo_views'
+  for s in (0, 1):
+    assert (pv('stop aug. views', s) / 'views.npz').read_bytes() == (
+        pv('augmented views', s) / 'views.npz').read_bytes()
+    assert (pv('stop aug. views', s) / 'copied_from.json').is_file()
+    assert not (pv('+ masks', s) / 'copied_from.json').exists()
   assert '| + masks | R1 |' in stdout
   # The camera-path video of the baseline against the last round.
   gif = out / 'video.gif'

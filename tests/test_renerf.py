@@ -121,6 +121,27 @@ def test_copy_baseline_shares_round_0_between_variants_only(tmp_path):
   with pytest.raises(RunDirError, match='not a finished round'):
     renerf.copy_baseline(variant, str(tmp_path / 'none'), str(tmp_path / 'y'))
   assert not os.path.exists(tmp_path / 'x') and not os.path.exists(tmp_path / 'y')
+  # A variant that trains D differently reuses dst's round-1 pseudo-views and masks.
+  dst2 = str(tmp_path / 'dst2')
+  renerf.copy_baseline(variant, src, dst2)
+  cli.check_run_dir(variant, dst, create=True)  # config.json: what made dst's views
+  other_lambda = tiny_config(max_steps=10, num_rounds=1, pseudo_targets='test',
+                             use_masks=True, hessian_lambda=1.)
+  assert not renerf.share_pseudo_views(other_lambda, dst, dst2)
+  assert not renerf.share_pseudo_views(variant, src, dst2)  # src has no round 1
+  assert not os.path.exists(os.path.join(dst2, 'round_1'))
+  early = tiny_config(max_steps=10, num_rounds=1, pseudo_schedule='early',
+                      pseudo_targets='test', use_masks=True)
+  assert renerf.share_pseudo_views(early, dst, dst2)
+  assert not renerf.share_pseudo_views(early, dst, dst2)  # already there
+  pv = lambda d: _files(os.path.join(d, 'round_1', 'pseudo_views'))
+  copied = pv(dst2)
+  assert 'copied_from.json' in copied
+  assert {k: v for k, v in copied.items() if k != 'copied_from.json'} == pv(dst)
+  state = renerf.run_rounds(early, scene, dst2, show_progress=False)
+  assert pv(dst2) == copied  # used as they are, not rendered again
+  np.testing.assert_array_equal(state.pseudo.masks, renerf.load_pseudo_views(
+      os.path.join(dst, 'round_1', 'pseudo_views')).masks)
 
 
 def test_uncertainty_heatmap_shows_the_order_despite_outliers_and_bad_values():
