@@ -89,8 +89,11 @@ def main(argv=None):
   os.makedirs(args.out, exist_ok=True)
   base = os.path.join(args.out, args.name)
   report.write_json(base + '.json', results)
-  time_note = ('seconds = step x the idle-CPU seconds per step given with --sec_per_step'
-               if rates else 'seconds as logged by the runs')
+  logged = [label for label in runs if label not in rates]
+  time_note = '; '.join(
+      ([f'{label}: step x {rate} s (idle-CPU seconds per step, --sec_per_step)'
+        for label, rate in rates.items()])
+      + ([f"{', '.join(logged)}: seconds as logged by the runs"] if logged else []))
   table = report.markdown_table(rows, [
       ('method', 'method'), ('runs', 'runs'), ('steps', 'steps'), ('time_s', 'train s'),
       ('psnr', 'PSNR'), ('ssim', 'SSIM'), ('lpips_alex', 'LPIPS-alex'),

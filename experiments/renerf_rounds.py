@@ -3,16 +3,22 @@
 Baseline, R1, R2, R3 (each round a model trained from scratch on the real views plus the
 previous round's pseudo-views), and the baseline trained for the same total wall time as
 the rounds (the control that tells "more compute" from "Re-Nerfing"). Mean +- std over
-seeds with a fixed step count per round. Fern, CPU, fast grid backbone, estimated from
-the idle-CPU rates of benchmarks/results/throughput.md (a 650-step training ~3.5 min plus
-~1 min of evaluation, 12 pseudo-views ~2.4 min): ~25 min per seed, ~75 min for 3 seeds,
-and the equal-time baselines as long again. fern_rounds_fast was made before the lr change
-of llff3_fast.gin (and before the 2.7x faster grid renderer: ~38 min per seed); to resume
-or reuse it add --gin_bindings "Config.lr_final = 1e-3".
+seeds with a fixed step count per round.
+
+Fern, CPU, fast grid backbone: fern_rounds_fast was made with llff3_fast.gin as it was
+before its lr change (650 steps with annealing, lr 1e-2 -> 1e-3) and took about 38 min
+per seed for the rounds, the equal-time baselines as long again. To resume or reproduce
+it, restore the configs of commit d6dd94a (`git checkout d6dd94a -- gin_configs`) and
+run
 
   python experiments/renerf_rounds.py --name fern_rounds_fast \
     --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
-    --scene fern --seeds 0 1 2
+    --scene fern --seeds 0 1 2 --gin_bindings "Config.lr_final = 1e-3"
+
+With the current 800-step config, estimated from the idle-CPU rates (training ~5 min,
+evaluation ~1 min, 12 pseudo-views ~2.4 min): ~30 min per seed for the rounds. The
+small table config (--config gin_configs/llff3_small_renerf.gin, see table_why.py) is
+about four times cheaper.
 
 Paper scale: --config gin_configs/llff3_renerf.gin. See experiments/tables.py for the run
 directories, baseline sharing and the equal-time rule.

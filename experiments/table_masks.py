@@ -5,16 +5,20 @@ views", Config.pseudo_schedule='all'), removed at step K ("stop aug. views", the
 and removed at K with the Laplace-uncertainty masks ("+ masks", Config.use_masks=True:
 the Hessian pass runs and the most uncertain pixels are left out of the loss). The three
 variants share one baseline per seed (taken from the rounds table with --baseline_from).
-Fern, CPU, fast grid backbone, estimated from the idle-CPU rates of
-benchmarks/results/throughput.md: nine rounds of ~7 min (pseudo-views ~2.4 min, training
-and evaluation ~4.5 min, plus a ~50 s Hessian pass for '+ masks'), about 65 min with the
-baselines reused from a rounds table made with the same --config (for fern_rounds_fast,
-made before llff3_fast.gin's lr change, add --gin_bindings "Config.lr_final = 1e-3"):
+Fern, CPU, fast grid backbone: experiments/results/fern_masks_fast.md was made with the
+650-step llff3_fast_renerf.gin of commit d6dd94a (restore it with
+`git checkout d6dd94a -- gin_configs` to resume or reproduce), the baselines taken from
+the baseline table made with the same config:
 
   python experiments/table_masks.py --name fern_masks_fast \
     --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 \
-    --baseline_from 'experiments/results/fern_rounds_fast/Re-Nerfing/seed{seed}'
+    --baseline_from 'experiments/results/fern_fast_baseline/Re-Nerfing/seed{seed}'
+
+Its rounds took 443-482 s each (pseudo-views and training; the '+ masks' Hessian pass
+56-58 s), plus about a minute of evaluation. The small table config
+(--config gin_configs/llff3_small_renerf.gin, see table_why.py) is about four times
+cheaper.
 
 The paper's numbers for this table are not in the script: the project has only its
 Table 1 numbers (renerf_rounds.py).

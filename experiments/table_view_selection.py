@@ -3,14 +3,16 @@
 Round 1 variants on top of one shared baseline per seed: the interpolation-factor presets
 2x {.5}; 3x {.33,.66}, {.2,.8}, {.1,.9}; 4x; 5x; 7x (the default); 11x; then pseudo-views
 rendered at the test poses only (the paper's "optimising for specific views") against as
-many random unobserved poses. Fern, CPU, fast grid backbone: ten variants x three seeds
-of one training each, so use --variant to split the table over several invocations (the
-runs are shared, a later invocation with all variants only collects them):
+many random unobserved poses. Fern on the 2-core CPU with the small table config
+(llff3_small_renerf.gin, see table_why.py): a baseline of ~85 s and ten rounds of
+~100-180 s per seed (training ~90 s, evaluation ~11 s, pseudo-views ~3.4 s each: 2 for
+2x, 22 for 11x), so about 70 min for three seeds: over the hour the other tables take.
+The runs resume, so the table can be split over several invocations with --variant (a
+later invocation with all variants only collects them):
 
-  python experiments/table_view_selection.py --name fern_views_fast \
-    --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
-    --scene fern --seeds 0 1 2 \
-    --baseline_from 'experiments/results/fern_rounds_fast/Re-Nerfing/seed{seed}'
+  python experiments/table_view_selection.py --name fern_views_small \
+    --config gin_configs/llff3_small_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --scene fern --seeds 0 1 2
 
 The paper's numbers for this table are not in the script: the project has only its
 Table 1 numbers (renerf_rounds.py).

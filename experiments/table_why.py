@@ -6,15 +6,18 @@ Round 1 variants on top of one shared baseline per seed:
   no reset              D continues from B's parameters (pseudo-views until K)
   reset + keep views    pseudo-views kept to the end (Config.pseudo_schedule='all')
   reset + add late      pseudo-views only in the last K steps ('late')
-Fern, CPU, fast grid backbone, estimated from the idle-CPU rates of
-benchmarks/results/throughput.md: twelve rounds of ~7 min and three 2x-long baselines of
-~8 min, about 1.8 hours with the baselines reused (from a rounds table made with the same
---config; see table_masks.py):
+Fern on the 2-core CPU with the small table config (llff3_small_renerf.gin: the fast grid
+backbone at half resolution, 400 steps): measured 45 min for three seeds (12.6 min for
+seed 0 alone on an idle CPU; seeds 1 and 2 shared the CPU with the test suite for part
+of their time), experiments/results/fern_why_small.md:
 
-  python experiments/table_why.py --name fern_why_fast \
-    --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
-    --scene fern --seeds 0 1 2 \
-    --baseline_from 'experiments/results/fern_rounds_fast/Re-Nerfing/seed{seed}'
+  python experiments/table_why.py --name fern_why_small \
+    --config gin_configs/llff3_small_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --scene fern --seeds 0 1 2
+
+With the full-resolution fast config (--config gin_configs/llff3_fast_renerf.gin) a seed
+should take about four times as long (4x the rays trained, 4x the pixels rendered;
+estimated, not measured).
 
 The paper's numbers for this table are not in the script: the project has only its
 Table 1 numbers (renerf_rounds.py).

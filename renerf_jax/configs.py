@@ -25,6 +25,9 @@ class Config:
   data_dir: str = ''  # Folder that holds the scene folders (e.g. .../nerf_llff_data).
   scene: str = 'fern'  # Scene folder name inside data_dir.
   factor: int = 8  # LLFF image downsampling factor (reads images_<factor>).
+  # Extra box-filter downsampling of the loaded images (focal / k, sizes cropped to a
+  # multiple of k), for the small CPU table configs; 1: off.
+  image_downsample: int = 1
   n_input_views: int = 3  # Few-shot training views (RegNeRF split).
   llffhold: int = 8  # Every llffhold-th image is a test view.
   white_bkgd: bool = False  # Composite on white (Blender).
@@ -147,6 +150,8 @@ class Config:
     _check(self.n_input_views >= 1, f'Config.n_input_views={self.n_input_views} must be >= 1')
     _check(self.far >= self.near, f'Config.far={self.far} < Config.near={self.near}')
     _check(self.factor >= 1, f'Config.factor={self.factor} must be >= 1')
+    _check(self.image_downsample >= 1,
+           f'Config.image_downsample={self.image_downsample} must be >= 1')
     _check(self.hessian_chunk >= 1, f'Config.hessian_chunk={self.hessian_chunk} must be >= 1')
     _check(self.render_chunk >= 1, f'Config.render_chunk={self.render_chunk} must be >= 1')
 

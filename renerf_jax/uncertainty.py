@@ -27,8 +27,10 @@ Conventions used throughout:
     of a ray that hits nothing is as uncertain as unseen space).
   * Masks: 1 keeps a pixel (U <= mu), 0 masks it (U > mu).
 """
+import collections
 import dataclasses
 import functools
+import hashlib
 import time
 from typing import NamedTuple, Optional
 
@@ -499,7 +501,59 @@ class Masks(NamedTuple):
   mask: np.ndarray  # [...] 1 keeps a pixel, 0 masks it.
   mu: float  # The threshold.
   rgb: np.ndarray  # [..., 3] the fine colour, rendered in the same pass as U.
-  hessian_seconds: float  # Wall time of the Hessian pass.
+  hessian_seconds: float  # Wall time of the Hessian pass (of the first, when cached).
+  hessian_cached: bool = False  # The pass was shared (cached_vertex_sigma).
+
+
+# Config fields that choose or use the pseudo-views but cannot change the Hessian pass
+# (the seed acts only through the subsampled training rays, which are part of the key).
+HESSIAN_IRRELEVANT_FIELDS = ('interp_factors', 'sequencing', 'pseudo_targets',
+                             'pseudo_n_random', 'mask_keep_frac', 'mask_threshold',
+                             'num_rounds', 'pseudo_frac', 'pseudo_until', 'pseudo_schedule',
+                             'renerf_init', 'seed')
+_HESSIAN_CACHE = collections.OrderedDict()  # key -> (vertex sigma, seconds)
+HESSIAN_CACHE_SIZE = 4
+
+
+def hessian_cache_key(config, params, train_rays, lo, hi, chunk):
+  """Digest of everything the Hessian pass depends on (see cached_vertex_sigma)."""
+  h = hashlib.sha1()
+  base = dataclasses.replace(config, **{
+      k: getattr(type(config)(), k) for k in HESSIAN_IRRELEVANT_FIELDS})
+  h.update(repr((base, int(chunk))).encode())
+  for leaf in jax.tree_util.tree_leaves((params, train_rays, lo, hi)):
+    a = np.ascontiguousarray(np.asarray(leaf))
+    h.update(repr((a.dtype.str, a.shape)).encode())
+    h.update(a.tobytes())
+  return h.hexdigest()
+
+
+def cached_vertex_sigma(config, params, train, lo, hi, chunk, show_progress=False):
+  """Per-vertex sigma of the Hessian pass, memoised within the process.
+
+  The variants of a view-selection table share one baseline per seed and differ only in
+  which pseudo-views they render: they need the same Hessian. The last
+  HESSIAN_CACHE_SIZE results are kept (a (2^8 + 1)^3 grid: 68 MB each), keyed on the
+  digest of the params, the subsampled training rays, the box and the config without
+  HESSIAN_IRRELEVANT_FIELDS.
+
+  Returns:
+    (sigma [V], seconds of the pass that computed it, whether it came from the cache).
+  """
+  key = hessian_cache_key(config, params, train, lo, hi, chunk)
+  if key in _HESSIAN_CACHE:
+    _HESSIAN_CACHE.move_to_end(key)
+    sigma, seconds = _HESSIAN_CACHE[key]
+    return sigma, seconds, True
+  t0 = time.perf_counter()
+  h_diag = hessian_diagonal(config, params, train, lo, hi, config.deform_log2_res,
+                            config.hessian_lambda, chunk=chunk, show_progress=show_progress)
+  sigma = jax.block_until_ready(vertex_sigma(h_diag))
+  seconds = time.perf_counter() - t0
+  _HESSIAN_CACHE[key] = (sigma, seconds)
+  while len(_HESSIAN_CACHE) > HESSIAN_CACHE_SIZE:
+    _HESSIAN_CACHE.popitem(last=False)
+  return sigma, seconds, False
 
 
 def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
@@ -527,13 +581,9 @@ def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
   shape = pseudo_rays.origins.shape[:-1]
   train = subsample_rays(flat(train_rays), config.hessian_rays, config.seed)
   lam = config.hessian_lambda
-  t0 = time.perf_counter()
-  h_diag = jax.block_until_ready(hessian_diagonal(
-      config, params, train, lo, hi, config.deform_log2_res, lam,
-      chunk=hessian_chunk or config.hessian_chunk,
-      show_progress=show_progress))
-  hessian_seconds = time.perf_counter() - t0
-  u, rgb = render_uncertainty(config, params, vertex_sigma(h_diag), flat(pseudo_rays), lo,
+  sigma, hessian_seconds, cached = cached_vertex_sigma(
+      config, params, train, lo, hi, hessian_chunk or config.hessian_chunk, show_progress)
+  u, rgb = render_uncertainty(config, params, sigma, flat(pseudo_rays), lo,
                               hi, chunk=config.render_chunk, u_bg=prior_sigma(lam),
                               show_progress=show_progress,
                               desc=(f'pseudo-views + uncertainty ({shape[0]})'
@@ -544,4 +594,5 @@ def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
     mu = threshold_for_keep_fraction(u, config.mask_keep_frac)
   mask = np.asarray(masks_from_uncertainty(u, mu))
   return Masks(uncertainty=u.reshape(shape), mask=mask.reshape(shape), mu=float(mu),
-               rgb=rgb.reshape(shape + (3,)), hessian_seconds=hessian_seconds)
+               rgb=rgb.reshape(shape + (3,)), hessian_seconds=hessian_seconds,
+               hessian_cached=cached)

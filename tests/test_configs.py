@@ -70,11 +70,33 @@ def test_renerf_configs_are_their_base_plus_three_rounds():
   import dataclasses
   for name, base_name, k in (('llff3_renerf.gin', 'llff3.gin', 5000),
                              ('llff3_cpu_renerf.gin', 'llff3_cpu.gin', 1000),
-                             ('llff3_fast_renerf.gin', 'llff3_fast.gin', 325)):
+                             ('llff3_fast_renerf.gin', 'llff3_fast.gin', 400)):
     c = load_config([os.path.join(REPO, 'gin_configs', name)])
     base = load_config([os.path.join(REPO, 'gin_configs', base_name)])
     assert (c.num_rounds, c.interp_factors, c.pseudo_until) == (3, '7x', k)
     assert (c.renerf_init, c.pseudo_schedule) == ('reset', 'early')
-    # K comes after the near/far annealing and the depth-TV decay.
-    assert k > max(c.anneal_nearfar_steps, c.depth_tv_maxstep, c.lr_delay_steps)
+    # K comes after the near/far annealing (when on), the depth-TV decay and the warm-up.
+    assert k > max(c.anneal_nearfar_steps * c.anneal_nearfar, c.depth_tv_maxstep,
+                   c.lr_delay_steps)
     assert dataclasses.replace(c, num_rounds=0) == dataclasses.replace(base, num_rounds=0)
+
+
+def test_small_table_config_is_the_fast_one_smaller():
+  """llff3_small_renerf.gin: the fast Re-Nerfing config at half resolution, with every
+  schedule in steps scaled with max_steps (K at half the steps, as in the fast one) and
+  RegNeRF's near/far annealing on."""
+  import dataclasses
+  small = load_config([os.path.join(REPO, 'gin_configs', 'llff3_small_renerf.gin')])
+  fast = load_config([os.path.join(REPO, 'gin_configs', 'llff3_fast_renerf.gin')])
+  assert small.image_downsample == 2 and fast.image_downsample == 1
+  assert small.max_steps < fast.max_steps and small.batch_size < fast.batch_size
+  for c in (small, fast):
+    assert c.pseudo_until == c.max_steps // 2
+    assert c.pseudo_until > max(c.depth_tv_maxstep, c.lr_delay_steps)
+  assert (small.lr_delay_steps / small.max_steps) == pytest.approx(
+      fast.lr_delay_steps / fast.max_steps, rel=0.3)
+  assert small.anneal_nearfar and not fast.anneal_nearfar
+  sizes = ('anneal_nearfar', 'image_downsample', 'batch_size', 'batch_size_random', 'max_steps',
+           'anneal_nearfar_steps', 'lr_delay_steps', 'depth_tv_maxstep', 'pseudo_until',
+           'eval_every', 'eval_stride', 'checkpoint_every', 'hessian_rays', 'lpips_nets')
+  assert dataclasses.replace(small, **{k: getattr(fast, k) for k in sizes}) == fast

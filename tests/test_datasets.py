@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from renerf_jax.configs import Config
-from renerf_jax.datasets import fewshot_split, load_scene
+from renerf_jax.datasets import camera_rays, downsample_scene, fewshot_split, load_scene
 from renerf_jax.errors import DataError
 from conftest import LLFF_DIR
 
@@ -55,6 +55,44 @@ def test_procedural_scene():
   assert a.images.std() > 0.15
   assert a.depths.max() / a.depths.min() > 3.
   assert np.abs(a.images[1] - a.images[7]).mean() > 0.05
+
+
+def test_image_downsample_fern(fern_dir):
+  full = load_scene(Config(data_dir=fern_dir, scene='fern'))
+  half = load_scene(Config(data_dir=fern_dir, scene='fern', image_downsample=2))
+  assert half.images.shape == (20, 189, 252, 3) and half.focal == pytest.approx(full.focal / 2)
+  np.testing.assert_allclose(half.images[3, 10, 7], full.images[3, 20:22, 14:16].mean((0, 1)),
+                             atol=1e-6)
+  np.testing.assert_array_equal(half.poses, full.poses)
+  np.testing.assert_array_equal(half.test_idx, full.test_idx)
+
+
+def test_downsample_rays_through_block_centres():
+  """A low-res pixel's ray is the mean of its k x k source rays (odd sizes: centre crop)."""
+  for size, off in [((24, 30), 0.), ((25, 31), 0.5)]:
+    full = load_scene(Config(dataset_loader='procedural', procedural_size=size,
+                             use_ndc=False))
+    low = downsample_scene(full, 3)
+    assert low.images.shape[1:3] == (8, 10) and low.depths.shape[1:] == (8, 10)
+    assert low.focal == pytest.approx(full.focal / 3)
+    d_full = np.asarray(camera_rays(full, [2]).directions)[0]
+    d_low = np.asarray(camera_rays(low, [2]).directions)[0]
+    # Crop offset (0, 0) in both cases; with one spare row and column the principal point
+    # moves by half a source pixel in x and y.
+    block = d_full[3:6, 6:9].mean((0, 1))
+    err = np.linalg.norm(d_low[1, 2] - block)
+    assert err <= off * np.sqrt(2) / full.focal + 1e-5, (size, err)
+    np.testing.assert_allclose(low.images[2, 1, 2], full.images[2, 3:6, 6:9].mean((0, 1)),
+                               atol=1e-6)
+    assert downsample_scene(full, 1) is full
+
+
+def test_image_downsample_too_large():
+  with pytest.raises(DataError, match='image_downsample=30'):
+    load_scene(Config(dataset_loader='procedural', procedural_size=(24, 32),
+                      image_downsample=30))
+  with pytest.raises(Exception, match='image_downsample=0'):
+    Config(image_downsample=0)
 
 
 # ---------------------------------------------------------------- bad input

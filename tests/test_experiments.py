@@ -106,7 +106,9 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   a, b = bb['methods']
   assert a['curves']['seed0'][-1][0] == 0.5 * 12  # step x the given seconds per step
   assert b['curves']['seed0'] != a['curves']['seed0']  # B keeps the logged seconds
-  assert '| A | 2 | 12 | 6 |' in (out / 'bb.md').read_text()
+  bb_md = (out / 'bb.md').read_text()
+  assert '| A | 2 | 12 | 6 |' in bb_md
+  assert 'A: step x 0.5 s' in bb_md and 'B: seconds as logged' in bb_md
   assert (out / 'bb.png').stat().st_size > 0
   bad = subprocess.run(cmd[:-2] + ['--sec_per_step', 'C=1'], cwd=REPO, capture_output=True,
                        text=True, timeout=120, check=False)

@@ -210,3 +210,35 @@ def test_compute_masks_end_to_end(setup):
   plain = render_flat(config, params, pseudo, chunk=32)['rgb']
   assert res.rgb.shape == (86, 3) and res.hessian_seconds > 0.
   np.testing.assert_allclose(res.rgb, plain, atol=1e-5)
+
+
+def test_hessian_pass_is_shared_only_when_nothing_it_depends_on_differs(setup, monkeypatch):
+  config, params, pool = setup
+  config = dataclasses.replace(config, deform_log2_res=1, hessian_rays=24,
+                               hessian_lambda=LAM, mask_keep_frac=0.5, render_chunk=64)
+  calls = []
+  real = unc.hessian_diagonal
+  monkeypatch.setattr(unc, 'hessian_diagonal', lambda *a, **k: calls.append(1) or real(*a, **k))
+  monkeypatch.setattr(unc, '_HESSIAN_CACHE', type(unc._HESSIAN_CACHE)())
+  pseudo = take(pool['rays'], np.arange(1, 600, 7))
+  first = unc.compute_masks(config, params, pool['rays'], pseudo, -1., 1., hessian_chunk=8)
+  # Another view-selection variant of the same baseline: other pseudo-views and keep
+  # fraction, same Hessian.
+  other = dataclasses.replace(config, interp_factors='2x', mask_keep_frac=0.7)
+  second = unc.compute_masks(other, params, pool['rays'], take(pool['rays'], np.arange(50)),
+                             -1., 1., hessian_chunk=8)
+  assert len(calls) == 1 and second.hessian_cached and not first.hessian_cached
+  assert second.hessian_seconds == first.hessian_seconds
+  again = unc.compute_masks(config, params, pool['rays'], pseudo, -1., 1., hessian_chunk=8)
+  np.testing.assert_array_equal(again.uncertainty, first.uncertainty)
+  np.testing.assert_array_equal(again.mask, first.mask)
+  # Anything the pass depends on triggers a new one: params, lambda, the rays (seed).
+  moved = jax.tree_util.tree_map(lambda x: x * 1.01, params)
+  unc.compute_masks(config, moved, pool['rays'], pseudo, -1., 1., hessian_chunk=8)
+  unc.compute_masks(dataclasses.replace(config, hessian_lambda=2 * LAM), params,
+                    pool['rays'], pseudo, -1., 1., hessian_chunk=8)
+  unc.compute_masks(dataclasses.replace(config, seed=3), params, pool['rays'], pseudo,
+                    -1., 1., hessian_chunk=8)
+  assert len(calls) == 4
+  # Bounded: the oldest entries go.
+  assert len(unc._HESSIAN_CACHE) == unc.HESSIAN_CACHE_SIZE

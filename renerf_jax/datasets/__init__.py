@@ -1,16 +1,20 @@
 """Datasets: LLFF, Blender and the embedded procedural scene, behind one `load_scene`."""
-from renerf_jax.datasets.scene import Scene, camera_rays, fewshot_split, ray_pool
+from renerf_jax.datasets.scene import (Scene, camera_rays, downsample_scene, fewshot_split,
+                                       ray_pool)
 
-__all__ = ["Scene", "camera_rays", "fewshot_split", "load_scene", "ray_pool"]
+__all__ = ["Scene", "camera_rays", "downsample_scene", "fewshot_split", "load_scene",
+           "ray_pool"]
 
 
 def load_scene(config) -> Scene:
-  """Loads the scene selected by config.dataset_loader."""
+  """Loads the scene selected by config.dataset_loader (then config.image_downsample)."""
   if config.dataset_loader == 'llff':
     from renerf_jax.datasets.llff import load_llff  # pylint: disable=g-import-not-at-top
-    return load_llff(config)
-  if config.dataset_loader == 'blender':
+    scene = load_llff(config)
+  elif config.dataset_loader == 'blender':
     from renerf_jax.datasets.blender import load_blender  # pylint: disable=g-import-not-at-top
-    return load_blender(config)
-  from renerf_jax.datasets.procedural import load_procedural  # pylint: disable=g-import-not-at-top
-  return load_procedural(config)
+    scene = load_blender(config)
+  else:
+    from renerf_jax.datasets.procedural import load_procedural  # pylint: disable=g-import-not-at-top
+    scene = load_procedural(config)
+  return downsample_scene(scene, config.image_downsample)

@@ -37,6 +37,34 @@ class Scene:
     return int(self.images.shape[2])
 
 
+def downsample_scene(scene: Scene, k: int) -> Scene:
+  """Box-filters a scene's images (and depths) by an integer factor k.
+
+  Args:
+    scene: the loaded scene.
+    k: downsampling factor (1: the scene itself); H and W are centre-cropped to
+      multiples of k (the principal point moves by at most half a source pixel).
+
+  Returns:
+    The scene at 1/k resolution with focal / k: a low-res pixel's ray is the ray through
+    the centre of the k x k source pixels it averages.
+  """
+  if k == 1:
+    return scene
+  h, w = scene.height // k, scene.width // k
+  if h < 1 or w < 1:
+    raise DataError(f'Config.image_downsample={k} is larger than the '
+                    f'{scene.height}x{scene.width} images of scene {scene.name!r}')
+  y0, x0 = (scene.height - h * k) // 2, (scene.width - w * k) // 2
+
+  def box(a):
+    a = a[:, y0:y0 + h * k, x0:x0 + w * k]
+    return a.reshape(a.shape[0], h, k, w, k, *a.shape[3:]).mean(axis=(2, 4)).astype(a.dtype)
+  return dataclasses.replace(
+      scene, images=box(scene.images), focal=scene.focal / k,
+      depths=None if scene.depths is None else box(scene.depths))
+
+
 def focus_depth_from_bounds(bounds, dt=0.75):
   """LLFF render-path focus: 1 / ((1 - dt) / close + dt / inf), close = 0.9 min bound,
   inf = 5 max bound (a depth between the nearest and a far point, weighted to the far)."""
