@@ -26,7 +26,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from renerf_jax import report, training  # pylint: disable=g-import-not-at-top
+from renerf_jax import jit_cache, report, training  # pylint: disable=g-import-not-at-top
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import make_pools, run_rounds
@@ -68,6 +68,7 @@ def main():
   p.add_argument('--calib_steps', type=int, default=15)
   p.add_argument('--out', default='experiments/results')
   args = p.parse_args()
+  jit_cache.enable_compilation_cache()
 
   results = {'name': args.name, 'base': args.base, 'bindings': args.gin_bindings,
              'budget_s': args.budget_s, 'seeds': args.seeds, 'methods': []}

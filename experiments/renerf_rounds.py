@@ -5,20 +5,26 @@ previous round's pseudo-views), and the baseline trained for the same total wall
 the rounds (the control that tells "more compute" from "Re-Nerfing"). Mean +- std over
 seeds with a fixed step count per round.
 
-Fern, CPU, fast grid backbone: fern_rounds_fast was made with llff3_fast.gin as it was
-before its lr change (650 steps with annealing, lr 1e-2 -> 1e-3) and took about 38 min
-per seed for the rounds, the equal-time baselines as long again. To resume or reproduce
-it, restore the configs of commit d6dd94a (`git checkout d6dd94a -- gin_configs`) and
-run
+Fern on the 2-core CPU with the small table config (llff3_small_renerf.gin, see
+table_why.py) and the Laplace masks on (the full method),
+experiments/results/fern_rounds_small.md. The rounds of three seeds took 49 min (an
+invocation of 17 min, killed and resumed by a second of 32 min), the equal-time control
+39 min more (a third invocation, without --no_equal_time: it reuses the finished rounds):
+
+  python experiments/renerf_rounds.py --name fern_rounds_small \
+    --config gin_configs/llff3_small_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --scene fern --seeds 0 1 2 \
+    --variant 'Re-Nerfing (masks)=Config.use_masks=True' [--no_equal_time]
+
+Fast grid backbone at full resolution: fern_rounds_fast was made with llff3_fast.gin as
+it was before its lr change (650 steps with annealing, lr 1e-2 -> 1e-3) and took about
+38 min per seed for the rounds, the equal-time baselines as long again. To resume or
+reproduce it, restore the configs of commit d6dd94a (`git checkout d6dd94a --
+gin_configs`) and run
 
   python experiments/renerf_rounds.py --name fern_rounds_fast \
     --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 --gin_bindings "Config.lr_final = 1e-3"
-
-With the current 800-step config, estimated from the idle-CPU rates (training ~5 min,
-evaluation ~1 min, 12 pseudo-views ~2.4 min): ~30 min per seed for the rounds. The
-small table config (--config gin_configs/llff3_small_renerf.gin, see table_why.py) is
-about four times cheaper.
 
 Paper scale: --config gin_configs/llff3_renerf.gin. See experiments/tables.py for the run
 directories, baseline sharing and the equal-time rule.

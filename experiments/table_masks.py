@@ -5,8 +5,22 @@ views", Config.pseudo_schedule='all'), removed at step K ("stop aug. views", the
 and removed at K with the Laplace-uncertainty masks ("+ masks", Config.use_masks=True:
 the Hessian pass runs and the most uncertain pixels are left out of the loss). The three
 variants share one baseline per seed (taken from the rounds table with --baseline_from).
-Fern, CPU, fast grid backbone: experiments/results/fern_masks_fast.md was made with the
-650-step llff3_fast_renerf.gin of commit d6dd94a (restore it with
+Fern on the 2-core CPU with the small table config (llff3_small_renerf.gin, see
+table_why.py), baselines and the '+ masks' rounds taken from the rounds table
+(renerf_rounds.py: the same config with Config.use_masks=True, so its R1 is this
+table's '+ masks' and is copied, not trained again): 21.5 min for three seeds,
+experiments/results/fern_masks_small.md:
+
+  python experiments/table_masks.py --name fern_masks_small \
+    --config gin_configs/llff3_small_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --scene fern --seeds 0 1 2 \
+    --baseline_from 'experiments/results/fern_rounds_small/Re-Nerfing (masks)/seed{seed}'
+
+Without the rounds table's runs it trains the baselines and '+ masks' too (about 20 min
+more: a baseline ~2.5 min, a masked round ~4 min a seed).
+
+Fast grid backbone at full resolution: experiments/results/fern_masks_fast.md was made
+with the 650-step llff3_fast_renerf.gin of commit d6dd94a (restore it with
 `git checkout d6dd94a -- gin_configs` to resume or reproduce), the baselines taken from
 the baseline table made with the same config:
 
@@ -16,9 +30,7 @@ the baseline table made with the same config:
     --baseline_from 'experiments/results/fern_fast_baseline/Re-Nerfing/seed{seed}'
 
 Its rounds took 443-482 s each (pseudo-views and training; the '+ masks' Hessian pass
-56-58 s), plus about a minute of evaluation. The small table config
-(--config gin_configs/llff3_small_renerf.gin, see table_why.py) is about four times
-cheaper.
+56-58 s), plus about a minute of evaluation.
 
 The paper's numbers for this table are not in the script: the project has only its
 Table 1 numbers (renerf_rounds.py).

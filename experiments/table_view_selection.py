@@ -3,16 +3,38 @@
 Round 1 variants on top of one shared baseline per seed: the interpolation-factor presets
 2x {.5}; 3x {.33,.66}, {.2,.8}, {.1,.9}; 4x; 5x; 7x (the default); 11x; then pseudo-views
 rendered at the test poses only (the paper's "optimising for specific views") against as
-many random unobserved poses. Fern on the 2-core CPU with the small table config
-(llff3_small_renerf.gin, see table_why.py): a baseline of ~85 s and ten rounds of
-~100-180 s per seed (training ~90 s, evaluation ~11 s, pseudo-views ~3.4 s each: 2 for
-2x, 22 for 11x), so about 70 min for three seeds: over the hour the other tables take.
-The runs resume, so the table can be split over several invocations with --variant (a
-later invocation with all variants only collects them):
+many random unobserved poses. The presets overlap (7x holds 5x, 3x_b and 3x_c; 11x holds
+7x): within one process each view is rendered once (pseudo_views.render_pseudo_views),
+and a variant still counts the seconds its views took.
 
-  python experiments/table_view_selection.py --name fern_views_small \
-    --config gin_configs/llff3_small_renerf.gin --data_dir ../shared/data/nerf_llff_data \
-    --scene fern --seeds 0 1 2
+Fern on the 2-core CPU with the small table config (llff3_small_renerf.gin, see
+table_why.py), baselines from the rounds table (renerf_rounds.py): ten rounds of
+2.3-2.6 min per seed (training ~2 min, evaluation ~18 s, a new pseudo-view ~4.5 s),
+87 min for three seeds, experiments/results/fern_views_small.md. The runs resume, so it
+was split over three invocations (C below the table's args): five variants (41 min),
+five more (45 min: killed after 8 min and resumed) and one with all variants that only
+collects them (21 s). The presets that hold one another ran in the same invocation so
+that they share their views; the second took its baselines from the first's 7x runs, so
+that the table shows one baseline row:
+
+  C="--name fern_views_small --config gin_configs/llff3_small_renerf.gin \
+     --data_dir ../shared/data/nerf_llff_data --scene fern --seeds 0 1 2"
+  python experiments/table_view_selection.py $C \
+    --baseline_from 'experiments/results/fern_rounds_small/Re-Nerfing (masks)/seed{seed}' \
+    --variant "7x=Config.interp_factors='7x'" --variant "5x=Config.interp_factors='5x'" \
+    --variant "3x_b=Config.interp_factors='3x_b'" \
+    --variant "3x_c=Config.interp_factors='3x_c'" --variant "11x=Config.interp_factors='11x'"
+  python experiments/table_view_selection.py $C \
+    --baseline_from 'experiments/results/fern_views_small/7x/seed{seed}' \
+    --variant "2x=Config.interp_factors='2x'" --variant "3x=Config.interp_factors='3x'" \
+    --variant "4x=Config.interp_factors='4x'" \
+    --variant "3 test poses=Config.pseudo_targets='test'" \
+    --variant "3 random poses=Config.pseudo_targets='random';Config.pseudo_n_random=3"
+  python experiments/table_view_selection.py $C \
+    --baseline_from 'experiments/results/fern_rounds_small/Re-Nerfing (masks)/seed{seed}'
+
+The last two variants have as many pseudo-views as the scene has test views (fern: 3,
+every 8th of its 20 images).
 
 The paper's numbers for this table are not in the script: the project has only its
 Table 1 numbers (renerf_rounds.py).

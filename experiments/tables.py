@@ -22,7 +22,10 @@ the median over seeds of (cumulative seconds of the rounds) / (baseline seconds 
 The median makes it robust to one seed having shared the CPU with something else.
 
 Writes <out>/<name>.json, <name>.md (our numbers; the paper's beside them where the
-script has them) and <name>_time.png (cheap test PSNR against cumulative seconds).
+script has them), <name>_time.png (cheap test PSNR during training against cumulative
+seconds, every seed) and <name>_metrics_time.png (PSNR, SSIM and LPIPS of the full
+evaluation after each round against cumulative seconds, mean +- std over seeds, with
+the equal-time baseline as a point of its own).
 """
 import argparse
 import dataclasses
@@ -33,7 +36,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from renerf_jax import cli, renerf, report, rundir  # pylint: disable=g-import-not-at-top
+from renerf_jax import cli, jit_cache, renerf, report, rundir  # pylint: disable=g-import-not-at-top
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 
@@ -102,8 +105,12 @@ def run_seed(config, scene, run_dir, share_from=()):
   and pseudo-view settings (renerf.share_pseudo_views): variants that differ only in how
   D is trained render them once per seed.
 
+  Whole finished rounds are copied from a run in share_from made with the same config
+  (renerf.copy_finished_rounds), e.g. the masks table's '+ masks' from the rounds table.
+
   Returns:
-    (list of per-round metrics, the run directory round_0 was copied from or None).
+    (list of per-round metrics, the run directory round_0 was copied from or None, the
+    run directory later rounds were copied from or None).
   """
   cli.check_run_dir(config, run_dir, create=True)
   copied = None
@@ -120,12 +127,20 @@ def run_seed(config, scene, run_dir, share_from=()):
     copied = report.read_json(os.path.join(run_dir, 'shared_baseline.json'))['from']
   if copied:
     report.write_json(os.path.join(run_dir, 'shared_baseline.json'), {'from': copied})
+  rounds_from = None
   if config.num_rounds > 0 and rundir.is_done(renerf.round_dir(run_dir, 0)):
+    for src in share_from:  # Whole rounds, if another run made them with this config.
+      if renerf.copy_finished_rounds(config, src, run_dir):
+        break
     for src in share_from:  # Round 1's pseudo-views, if another variant made the same.
       if renerf.share_pseudo_views(config, src, run_dir):
         break
+  for r in range(1, config.num_rounds + 1):
+    path = os.path.join(renerf.round_dir(run_dir, r), 'copied_from.json')
+    if os.path.isfile(path):
+      rounds_from = os.path.dirname(report.read_json(path)['from'])
   state = renerf.run_rounds(config, scene, run_dir)
-  return list(state.metrics), copied
+  return list(state.metrics), copied, rounds_from
 
 
 def summarize(label, runs, rounds):
@@ -169,11 +184,12 @@ def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
   Returns:
     The results dict written to <out>/<name>.json.
   """
+  jit_cache.enable_compilation_cache()
   bindings = bindings_of(args)
   root = os.path.join(args.out, args.name)
   results = {'name': args.name, 'config': args.config, 'bindings': bindings,
              'seeds': args.seeds, 'variants': [], 'command': 'python ' + shlex.join(sys.argv)}
-  rows, curves, shared_rows = [], {}, set()
+  rows, curves, shared_rows, summaries, copied_rounds = [], {}, set(), {}, {}
   first_runs = None
   for vi, spec in enumerate(variants):
     label, _, extra = spec.partition('=')
@@ -182,20 +198,27 @@ def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
     if not any(b.replace(' ', '').startswith('Config.num_rounds=') for b in extra):
       config = dataclasses.replace(config, num_rounds=args.rounds)
     scene = load_scene(config)
-    runs, dirs, copied = [], [], []
+    runs, dirs, copied, rounds_copied = [], [], [], []
     for seed in args.seeds:
       run_dir = os.path.join(root, label, f'seed{seed}')
       share = [os.path.join(root, v.partition('=')[0], f'seed{seed}') for v in variants[:vi]]
       if args.baseline_from:
         share.append(args.baseline_from.format(seed=seed))
-      metrics, src = run_seed(dataclasses.replace(config, seed=seed), scene, run_dir, share)
+      metrics, src, rounds_src = run_seed(dataclasses.replace(config, seed=seed), scene,
+                                          run_dir, share)
       runs.append(metrics)
       dirs.append(run_dir)
       copied.append(src)
+      rounds_copied.append(rounds_src)
       curves[f'{label} seed {seed}'] = curve_of(run_dir, config.num_rounds)
     results['variants'].append({'label': label, 'bindings': extra, 'runs': runs,
-                                'run_dirs': dirs, 'baseline_copied_from': copied})
+                                'run_dirs': dirs, 'baseline_copied_from': copied,
+                                'rounds_copied_from': rounds_copied})
+    if any(rounds_copied):
+      copied_rounds[label] = sorted({os.path.relpath(os.path.dirname(d)) for d in rounds_copied
+                                     if d})
     vrows = summarize(label, runs, config.num_rounds)
+    summaries[label] = vrows
     # A baseline copied from an earlier variant of this table is that variant's row.
     if vi > 0 and all(c and os.path.abspath(c).startswith(os.path.abspath(root) + os.sep)
                       for c in copied):
@@ -218,16 +241,37 @@ def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
     row = summarize('baseline, equal total time', runs, 0)[0]
     row['round'] = f'{steps} steps'
     rows.append(row)
+    summaries[f'baseline, {steps} steps'] = [row]
 
   results['rows'] = rows
   report.write_json(os.path.join(args.out, args.name + '.json'), results)
+  if copied_rounds:
+    paper_note += ''.join(
+        f" The rounds of '{label}' are those of {', '.join(srcs)} (the same config; copied "
+        f'from there, with their times).' for label, srcs in copied_rounds.items())
   text = markdown(args, rows, paper or {}, shared_rows, paper_note, results['command'])
   report.write_markdown(os.path.join(args.out, args.name + '.md'), text)
   report.plot_error_vs_time(curves, os.path.join(args.out, args.name + '_time.png'),
                             metric='psnr',
                             title=f'{args.name}: test PSNR vs cumulative seconds')
+  report.plot_metrics_vs_time(
+      metric_curves(summaries), os.path.join(args.out, args.name + '_metrics_time.png'),
+      title=f'{args.name}: full test metrics after each round vs cumulative seconds '
+            f'(mean +- std over seeds {args.seeds})')
   print(text)
   return results
+
+
+def metric_curves(summaries):
+  """{metric: {variant: [(mean cumulative seconds, mean, std of the metric) per round]}}."""
+  out = {}
+  for metric in METRICS:
+    curves = {label: [(r['cumulative_seconds'], r[metric], r.get(metric + '_std', 0.))
+                      for r in vrows]
+              for label, vrows in summaries.items() if all(metric in r for r in vrows)}
+    if curves:
+      out[NAMES[metric]] = curves
+  return out
 
 
 def markdown(args, rows, paper, shared_rows, paper_note, command):

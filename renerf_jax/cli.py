@@ -2,7 +2,7 @@
 import dataclasses
 import os
 
-from renerf_jax import report
+from renerf_jax import jit_cache, report
 from renerf_jax.configs import config_to_gin, default_run_dir, load_config, parse_args
 from renerf_jax.errors import RunDirError
 
@@ -14,8 +14,9 @@ RESUMABLE_FIELDS = ('num_rounds', 'print_every', 'render_chunk', 'hessian_chunk'
 
 
 def setup(argv, description):
-  """Parses flags and gin; returns (config, run_dir)."""
+  """Parses flags and gin, turns on the compilation cache; returns (config, run_dir)."""
   args = parse_args(argv, description)
+  jit_cache.enable_compilation_cache()
   config = load_config(args.gin_configs, args.gin_bindings)
   return config, args.run_dir or default_run_dir(args.gin_configs)
 

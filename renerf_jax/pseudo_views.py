@@ -1,5 +1,6 @@
 """Pseudo-views: model B rendered at poses between neighbouring training cameras."""
 import os
+import time
 from typing import Optional
 
 import flax
@@ -8,9 +9,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from renerf_jax import poses as pose_lib
-from renerf_jax import report
+from renerf_jax import memo, report
 from renerf_jax.datasets import camera_rays
 from renerf_jax.errors import ConfigError
+from renerf_jax.progress import progress_bar
 from renerf_jax.rendering import render_flat
 
 
@@ -90,17 +92,62 @@ def random_target_poses(config, scene):
   return pose_lib.random_poses_sphere(train, config.pseudo_n_random, rng)
 
 
-def render_pseudo_views(config, scene, params, poses, show_progress=True) -> PseudoViews:
-  """Renders model `params` at `poses`; all pixels valid (masks of ones)."""
-  rays = camera_rays(scene, None, poses)
-  m, h, w = rays.origins.shape[:3]
-  flat = jax.tree_util.tree_map(lambda v: v.reshape((m * h * w,) + v.shape[3:]), rays)
-  out = render_flat(config, params, flat, show_progress=show_progress,
-                    desc=f'pseudo-views ({m})')
-  images = np.clip(out['rgb'], 0., 1.).reshape(m, h, w, 3)
-  return PseudoViews(images=images, poses=np.asarray(poses),
-                     masks=np.ones((m, h, w), np.float32),
-                     uncertainty=np.zeros((m, h, w), np.float32))
+# Config fields that cannot change a rendered pseudo-view's pixels (which views a round
+# renders, how D is trained, the masks; render_pseudo_views is the unmasked path): the
+# variants of one baseline in a table share their views through _VIEW_CACHE.
+RENDER_IRRELEVANT_FIELDS = ('interp_factors', 'sequencing', 'pseudo_targets',
+                            'pseudo_n_random', 'num_rounds', 'pseudo_frac', 'pseudo_until',
+                            'pseudo_schedule', 'renerf_init', 'use_masks', 'deform_log2_res',
+                            'hessian_rays', 'hessian_lambda', 'hessian_chunk',
+                            'mask_keep_frac', 'mask_threshold', 'seed', 'checkpoint_every',
+                            'eval_every', 'print_every')
+VIEW_CACHE_BYTES = 1 << 30  # About 2000 views at 252x189, 470 at 504x378.
+_VIEW_CACHE = memo.LruCache(max_bytes=VIEW_CACHE_BYTES)  # key -> (image, seconds)
+
+
+def render_pseudo_views(config, scene, params, poses, show_progress=True):
+  """Renders model `params` at `poses`; all pixels valid (masks of ones).
+
+  Each view's rays are made and rendered on their own (they start a chunk), so a view's
+  pixels do not depend on which other views a round renders, and a view this process
+  has already rendered with the same params, rays and render settings is taken from
+  _VIEW_CACHE: the view-selection presets overlap (7x holds 5x, 3x_b and 3x_c; 11x
+  holds 7x).
+
+  Returns:
+    (PseudoViews, info: {'rendered_views', 'cached_views', 'cached_seconds': the render
+    seconds the cached views took when they were rendered}).
+  """
+  m, h, w = len(poses), scene.height, scene.width
+  base = memo.digest(memo.config_key(config, RENDER_IRRELEVANT_FIELDS), params)
+  images = np.zeros((m, h, w, 3), np.float32)
+  todo, cached_seconds = [], 0.
+  for i in range(m):
+    # One pose at a time: batched ray generation differs in the last bit between batches.
+    rays = camera_rays(scene, None, poses[i:i + 1])
+    view = jax.tree_util.tree_map(lambda v: np.asarray(v).reshape((h * w,) + v.shape[3:]),
+                                  rays)
+    key = memo.digest(base, view)
+    hit = _VIEW_CACHE.get(key)
+    if hit is None:
+      todo.append((i, key, view))
+    else:
+      images[i] = hit[0]
+      cached_seconds += hit[1]
+  bar = progress_bar(total=len(todo) * h * w, unit='ray', disable=not show_progress,
+                     desc=f'pseudo-views ({len(todo)} of {m}, {m - len(todo)} cached)')
+  for i, key, view in todo:
+    t0 = time.perf_counter()
+    out = render_flat(config, params, view)
+    images[i] = np.clip(out['rgb'], 0., 1.).reshape(h, w, 3)
+    _VIEW_CACHE.put(key, (images[i].copy(), time.perf_counter() - t0))
+    bar.update(h * w)
+  bar.close()
+  pv = PseudoViews(images=images, poses=np.asarray(poses),
+                   masks=np.ones((m, h, w), np.float32),
+                   uncertainty=np.zeros((m, h, w), np.float32))
+  return pv, {'rendered_views': len(todo), 'cached_views': m - len(todo),
+              'cached_seconds': cached_seconds}
 
 
 def save_pseudo_views(directory, pv: PseudoViews, meta, save_png=True):

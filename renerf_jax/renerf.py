@@ -87,7 +87,9 @@ def synthesize(config, scene, params, out_dir, show_progress=True):
   render pass, with masks including U and the threshold) and, with masks,
   hessian_seconds (the extra work of the masks), mu and kept_fraction. A Hessian pass
   taken from uncertainty.cached_vertex_sigma (another variant with the same baseline)
-  is marked hessian_cached and its seconds still count in `seconds`.
+  is marked hessian_cached and its seconds still count in `seconds`. Without masks,
+  views taken from pseudo_views' in-process view cache are counted in cached_views and
+  their render seconds (cached_seconds) count in `seconds` too.
   Cached in out_dir (views.npz written atomically), so a resumed round reuses them.
 
   Returns:
@@ -102,11 +104,13 @@ def synthesize(config, scene, params, out_dir, show_progress=True):
   if config.use_masks:
     pv, timing = masked_pseudo_views(config, scene, params, poses, show_progress)
   else:
-    pv = render_pseudo_views(config, scene, params, poses, show_progress)
-    timing = {'render_seconds': time.perf_counter() - t0}
+    pv, timing = render_pseudo_views(config, scene, params, poses, show_progress)
+    timing['render_seconds'] = time.perf_counter() - t0
   timing['seconds'] = time.perf_counter() - t0
-  if timing.get('hessian_cached'):  # A shared pass still counts, as if run here.
+  # Shared work still counts, as if done here.
+  if timing.get('hessian_cached'):
     timing['seconds'] += timing['hessian_seconds']
+  timing['seconds'] += timing.get('cached_seconds', 0.)
   save_pseudo_views(out_dir, pv, meta)
   report.write_json(info_path, timing)
   return pv, timing['seconds']
@@ -210,13 +214,64 @@ ROUND_FIELDS = ('num_rounds', 'pseudo_frac', 'pseudo_until', 'pseudo_schedule',
                 'checkpoint_every', 'render_chunk')
 
 
-def baseline_differences(config, saved_config: dict):
-  """Names of the fields (outside ROUND_FIELDS) in which two configs' baselines differ."""
+def config_differences(config, saved_config: dict, ignore=()):
+  """Names of the fields outside `ignore` in which config and a saved config.json differ
+  (a field missing from the saved one, added to Config later, counts as its default)."""
   current = report.to_jsonable(dataclasses.asdict(config))
   defaults = report.to_jsonable(dataclasses.asdict(type(config)()))
   saved = dict({k: v for k, v in defaults.items() if k not in saved_config}, **saved_config)
   return sorted(k for k in set(saved) | set(current)
-                if k not in ROUND_FIELDS and saved.get(k) != current.get(k))
+                if k not in ignore and saved.get(k) != current.get(k))
+
+
+def baseline_differences(config, saved_config: dict):
+  """Names of the fields (outside ROUND_FIELDS) in which two configs' baselines differ."""
+  return config_differences(config, saved_config, ROUND_FIELDS)
+
+
+def _same_bytes(path_a, path_b):
+  if not (os.path.isfile(path_a) and os.path.isfile(path_b)):
+    return False
+  with open(path_a, 'rb') as a, open(path_b, 'rb') as b:
+    return a.read() == b.read()
+
+
+def copy_finished_rounds(config, src_run_dir, dst_run_dir):
+  """Copies rounds 1..config.num_rounds that another run finished with the same config.
+
+  A variant of one table can be a run of another (the masks table's '+ masks' is the
+  rounds table's R1 when both use the same config). Round r is copied when src's
+  config.json equals config in every field but num_rounds, src has finished round r,
+  dst has not started it, and both runs' round r - 1 params are byte-identical (dst's
+  model B is src's, e.g. a copied baseline). A round is a deterministic function of its
+  config and B, so the copy is what training it again would give; it keeps its timing
+  (cumulative seconds) and records copied_from.json. Each copy is made in a temp
+  directory and renamed into place.
+
+  Returns:
+    The rounds copied (a list of ints; empty when src does not qualify).
+  """
+  cfg_path = os.path.join(src_run_dir, 'config.json')
+  if (os.path.abspath(src_run_dir) == os.path.abspath(dst_run_dir)
+      or not os.path.isfile(cfg_path)
+      or config_differences(config, report.read_json(cfg_path), ('num_rounds',))):
+    return []
+  copied = []
+  for r in range(1, config.num_rounds + 1):
+    src, dst = round_dir(src_run_dir, r), round_dir(dst_run_dir, r)
+    if os.path.exists(dst):
+      continue
+    if not rundir.is_done(src) or not _same_bytes(
+        *(os.path.join(round_dir(d, r - 1), 'params.msgpack')
+          for d in (src_run_dir, dst_run_dir))):
+      break
+    tmp = os.path.join(dst_run_dir, f'.round_{r}.{os.getpid()}.tmp')
+    shutil.rmtree(tmp, ignore_errors=True)
+    shutil.copytree(src, tmp)
+    report.write_json(os.path.join(tmp, 'copied_from.json'), {'from': os.path.abspath(src)})
+    os.replace(tmp, dst)
+    copied.append(r)
+  return copied
 
 
 def copy_baseline(config, src_run_dir, dst_run_dir):
@@ -279,18 +334,10 @@ def share_pseudo_views(config, src_run_dir, dst_run_dir):
       or not all(os.path.isfile(os.path.join(src, f)) for f in ('views.npz', 'timing.json'))
       or not os.path.isfile(cfg_path)):
     return False
-  saved = report.read_json(cfg_path)
-  current = report.to_jsonable(dataclasses.asdict(config))
-  defaults = report.to_jsonable(dataclasses.asdict(type(config)()))
-  if baseline_differences(config, saved) or any(
-      saved.get(k, defaults[k]) != current[k] for k in PSEUDO_VIEW_FIELDS):
+  ignore = tuple(k for k in ROUND_FIELDS if k not in PSEUDO_VIEW_FIELDS)
+  if config_differences(config, report.read_json(cfg_path), ignore) or not _same_bytes(
+      *(os.path.join(round_dir(d, 0), 'params.msgpack') for d in (src_run_dir, dst_run_dir))):
     return False
-  params = [os.path.join(round_dir(d, 0), 'params.msgpack') for d in (src_run_dir, dst_run_dir)]
-  if not all(os.path.isfile(p) for p in params):
-    return False
-  with open(params[0], 'rb') as a, open(params[1], 'rb') as b:
-    if a.read() != b.read():
-      return False
   os.makedirs(dst_round, exist_ok=True)
   tmp = os.path.join(dst_round, f'.pseudo_views.{os.getpid()}.tmp')
   shutil.rmtree(tmp, ignore_errors=True)

@@ -31,7 +31,7 @@ DEFAULT_FLOAT_FORMATS = (
 )
 FALLBACK_FLOAT_FORMAT = '.4f'
 
-Curve = Sequence[Tuple[float, float]]
+Curve = Sequence[Tuple[float, ...]]  # (seconds, value) or (seconds, value, std) points
 
 
 def _default_file_mode():
@@ -261,12 +261,17 @@ def _save_figure(fig, path, dpi=120):
 
 
 def _draw_curves(ax, curves: Mapping[str, Curve], metric, logx=False):
-  """Draws one line with markers per label on `ax`."""
+  """Draws one line with markers per label on `ax`; (t, value, std) points get error bars."""
   for label, points in curves.items():
-    pts = np.asarray(list(points), dtype=np.float64).reshape(-1, 2)
+    points = list(points)
+    width = len(points[0]) if points else 2
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, width)
     order = np.argsort(pts[:, 0], kind='stable')
-    ax.plot(pts[order, 0], pts[order, 1], marker='o', markersize=3,
-            label=str(label))
+    if width == 3:
+      ax.errorbar(pts[order, 0], pts[order, 1], yerr=pts[order, 2], marker='o',
+                  markersize=3, capsize=3, label=str(label))
+    else:
+      ax.plot(pts[order, 0], pts[order, 1], marker='o', markersize=3, label=str(label))
   ax.set_xlabel('wall-clock time [s]')
   ax.set_ylabel(metric.upper() if metric.lower() in ('psnr', 'ssim', 'lpips')
                 else metric)

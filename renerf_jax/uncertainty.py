@@ -27,10 +27,8 @@ Conventions used throughout:
     of a ray that hits nothing is as uncertain as unseen space).
   * Masks: 1 keeps a pixel (U <= mu), 0 masks it (U > mu).
 """
-import collections
 import dataclasses
 import functools
-import hashlib
 import time
 from typing import NamedTuple, Optional
 
@@ -39,7 +37,7 @@ import jax.numpy as jnp
 import jaxopt
 import numpy as np
 
-from renerf_jax import mip
+from renerf_jax import memo, mip
 from renerf_jax.model import materialize, render_rays
 from renerf_jax.progress import progress_bar
 
@@ -511,21 +509,14 @@ HESSIAN_IRRELEVANT_FIELDS = ('interp_factors', 'sequencing', 'pseudo_targets',
                              'pseudo_n_random', 'mask_keep_frac', 'mask_threshold',
                              'num_rounds', 'pseudo_frac', 'pseudo_until', 'pseudo_schedule',
                              'renerf_init', 'seed')
-_HESSIAN_CACHE = collections.OrderedDict()  # key -> (vertex sigma, seconds)
 HESSIAN_CACHE_SIZE = 4
+_HESSIAN_CACHE = memo.LruCache(max_items=HESSIAN_CACHE_SIZE)  # key -> (sigma, seconds)
 
 
 def hessian_cache_key(config, params, train_rays, lo, hi, chunk):
   """Digest of everything the Hessian pass depends on (see cached_vertex_sigma)."""
-  h = hashlib.sha1()
-  base = dataclasses.replace(config, **{
-      k: getattr(type(config)(), k) for k in HESSIAN_IRRELEVANT_FIELDS})
-  h.update(repr((base, int(chunk))).encode())
-  for leaf in jax.tree_util.tree_leaves((params, train_rays, lo, hi)):
-    a = np.ascontiguousarray(np.asarray(leaf))
-    h.update(repr((a.dtype.str, a.shape)).encode())
-    h.update(a.tobytes())
-  return h.hexdigest()
+  return memo.digest(memo.config_key(config, HESSIAN_IRRELEVANT_FIELDS), np.int64(chunk),
+                     params, train_rays, lo, hi)
 
 
 def cached_vertex_sigma(config, params, train, lo, hi, chunk, show_progress=False):
@@ -541,18 +532,16 @@ def cached_vertex_sigma(config, params, train, lo, hi, chunk, show_progress=Fals
     (sigma [V], seconds of the pass that computed it, whether it came from the cache).
   """
   key = hessian_cache_key(config, params, train, lo, hi, chunk)
-  if key in _HESSIAN_CACHE:
-    _HESSIAN_CACHE.move_to_end(key)
-    sigma, seconds = _HESSIAN_CACHE[key]
+  hit = _HESSIAN_CACHE.get(key)
+  if hit is not None:
+    sigma, seconds = hit
     return sigma, seconds, True
   t0 = time.perf_counter()
   h_diag = hessian_diagonal(config, params, train, lo, hi, config.deform_log2_res,
                             config.hessian_lambda, chunk=chunk, show_progress=show_progress)
   sigma = jax.block_until_ready(vertex_sigma(h_diag))
   seconds = time.perf_counter() - t0
-  _HESSIAN_CACHE[key] = (sigma, seconds)
-  while len(_HESSIAN_CACHE) > HESSIAN_CACHE_SIZE:
-    _HESSIAN_CACHE.popitem(last=False)
+  _HESSIAN_CACHE.put(key, (sigma, seconds))
   return sigma, seconds, False
 
 

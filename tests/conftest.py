@@ -1,5 +1,13 @@
-"""Shared test fixtures: paths of the real scenes in ../shared/data (read-only)."""
+"""Shared test fixtures: paths of the real scenes in ../shared/data (read-only).
+
+The suite compiles the same small steps in many tests and in the subprocesses of the CLI,
+notebook and crash tests: they share one persistent compilation cache in a fresh
+temporary directory (never the user's ~/.cache), so no test depends on an earlier run.
+"""
+import atexit
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -37,3 +45,12 @@ def tiny_config(**kw):
 
 
 os.environ.setdefault('TF_CPP_MIN_LOG_LEVEL', '2')
+_CACHE_DIR = tempfile.mkdtemp(prefix='renerf-test-xla-')
+os.environ['RENERF_JAX_CACHE_DIR'] = _CACHE_DIR
+atexit.register(shutil.rmtree, _CACHE_DIR, True)  # whichever process imported this
+
+
+def pytest_configure(config):  # pylint: disable=unused-argument
+  from renerf_jax import jit_cache  # pylint: disable=g-import-not-at-top
+  jit_cache.enable_compilation_cache()
+

@@ -39,6 +39,8 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   assert rows[0]['seeds'] == 2 and rows[0]['psnr_std'] > 0  # two different seeds
   assert (out / 't1.md').read_text().count('19.08') == 1  # the paper's baseline beside ours
   assert (out / 't1_time.png').stat().st_size > 0
+  png = iio.imread(out / 't1_metrics_time.png')  # PSNR | SSIM | LPIPS-alex panels
+  assert png.shape[1] > 2 * png.shape[0]
 
   # A masks-style ablation reusing t1's baselines: no baseline is trained again, and every
   # variant's round_0 is a bit-for-bit copy.
@@ -113,3 +115,16 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   bad = subprocess.run(cmd[:-2] + ['--sec_per_step', 'C=1'], cwd=REPO, capture_output=True,
                        text=True, timeout=120, check=False)
   assert bad.returncode != 0 and 'unknown label' in bad.stderr
+
+
+def test_metric_curves_follow_each_variant_over_its_rounds():
+  sys.path.insert(0, str(REPO / 'experiments'))
+  import tables  # pylint: disable=g-import-not-at-top
+  rows = lambda label, pts: [dict(variant=label, cumulative_seconds=t, psnr=p, psnr_std=.3,
+                                  ssim=p / 40, lpips_alex=1 - p / 40) for t, p in pts]
+  curves = tables.metric_curves({'Re-Nerfing': rows('Re-Nerfing', [(90, 19.), (220, 19.5)]),
+                                 'baseline, 900 steps': rows('eq', [(230, 20.)])})
+  assert list(curves) == ['PSNR', 'SSIM', 'LPIPS-alex']  # no LPIPS-vgg in these rows
+  assert curves['PSNR'] == {'Re-Nerfing': [(90, 19., .3), (220, 19.5, .3)],
+                            'baseline, 900 steps': [(230, 20., .3)]}
+  assert curves['LPIPS-alex']['Re-Nerfing'][1] == (220, 1 - 19.5 / 40, 0.)

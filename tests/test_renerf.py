@@ -1,3 +1,4 @@
+import dataclasses
 import os
 
 import jax
@@ -158,3 +159,87 @@ def test_uncertainty_heatmap_shows_the_order_despite_outliers_and_bad_values():
   # A shared reference scale: the same U gets the same colour in every view.
   other = np.full((2, 2), 121.0)
   np.testing.assert_allclose(uncertainty_heatmap(other, u)[0, 0], heat[0, 1])
+
+
+def test_overlapping_view_sets_render_each_view_once_with_identical_pixels(monkeypatch):
+  from renerf_jax import memo  # pylint: disable=g-import-not-at-top
+  from renerf_jax import pseudo_views as pv_lib  # pylint: disable=g-import-not-at-top
+  from renerf_jax import training  # pylint: disable=g-import-not-at-top
+  monkeypatch.setattr(pv_lib, '_VIEW_CACHE', memo.LruCache(max_bytes=1 << 30))
+  calls = []
+  real = pv_lib.render_flat
+  monkeypatch.setattr(pv_lib, 'render_flat',
+                      lambda *a, **k: calls.append(1) or real(*a, **k))
+  config = tiny_config(render_chunk=300)  # 32 x 40 = 1280 rays: a padded last chunk
+  scene = load_scene(config)
+  params = training.init_state(config, jax.random.PRNGKey(3)).params
+  poses7, _ = pseudo_view_poses(dataclasses.replace(config, interp_factors='7x'), scene)
+  poses3, _ = pseudo_view_poses(dataclasses.replace(config, interp_factors='3x_c'), scene)
+  seven, info7 = pv_lib.render_pseudo_views(config, scene, params, poses7, False)
+  assert info7 == {'rendered_views': 12, 'cached_views': 0, 'cached_seconds': 0.}
+  assert len(calls) == 12
+  # 3x_c ({.1, .9}) is part of 7x: all four views come from the cache, bit for bit, and
+  # the seconds they took to render are reported.
+  other = dataclasses.replace(config, interp_factors='3x_c', seed=5, pseudo_schedule='all')
+  three, info3 = pv_lib.render_pseudo_views(other, scene, params, poses3, False)
+  assert info3['cached_views'] == 4 and info3['rendered_views'] == 0 and len(calls) == 12
+  assert info3['cached_seconds'] > 0.
+  idx = [int(np.flatnonzero(np.all(poses7 == p, axis=(1, 2)))[0]) for p in poses3]
+  np.testing.assert_array_equal(three.images, seven.images[idx])
+  # The same views rendered in a fresh cache, alone: the same pixels (a view's rays start
+  # a chunk, whatever else the round renders).
+  monkeypatch.setattr(pv_lib, '_VIEW_CACHE', memo.LruCache(max_bytes=1 << 30))
+  alone, _ = pv_lib.render_pseudo_views(config, scene, params, poses3[1:2], False)
+  np.testing.assert_array_equal(alone.images[0], seven.images[idx[1]])
+  # Other params or render settings: rendered again.
+  moved = jax.tree_util.tree_map(lambda x: x * 1.01, params)
+  _, info = pv_lib.render_pseudo_views(config, scene, moved, poses3[1:2], False)
+  assert info['rendered_views'] == 1
+  _, info = pv_lib.render_pseudo_views(dataclasses.replace(config, num_samples=4), scene,
+                                       params, poses3[1:2], False)
+  assert info['rendered_views'] == 1
+
+
+def test_lru_cache_keeps_recent_entries_within_its_budgets():
+  from renerf_jax import memo  # pylint: disable=g-import-not-at-top
+  cache = memo.LruCache(max_items=3, max_bytes=100)
+  for k in 'abc':
+    cache.put(k, np.zeros(3, np.float64))  # 24 bytes each
+  assert cache.get('a') is not None  # 'a' is now the most recent
+  cache.put('d', np.zeros(3))
+  assert 'b' not in cache and all(k in cache for k in 'acd') and len(cache) == 3
+  cache.put('e', np.zeros(7))  # 56 bytes: 'c' and 'a' go to stay within 100 bytes
+  assert [k in cache for k in 'acde'] == [False, False, True, True]
+  cache.put('huge', np.zeros(20))  # 160 bytes: larger than the budget, not stored
+  assert 'huge' not in cache and 'd' in cache
+  assert cache.get('nothing') is None
+  assert memo.digest(np.arange(3)) != memo.digest(np.arange(3.))  # dtype counts
+  assert memo.digest('a', np.zeros(2)) == memo.digest('a', np.zeros(2))
+
+
+def test_finished_rounds_of_a_run_with_the_same_config_are_copied_not_retrained(tmp_path):
+  config = tiny_config(max_steps=10, num_rounds=1, pseudo_until=5)
+  scene = load_scene(config)
+  src, dst = str(tmp_path / 'src'), str(tmp_path / 'dst')
+  from renerf_jax import cli  # pylint: disable=g-import-not-at-top
+  cli.check_run_dir(config, src, create=True)
+  renerf.run_rounds(config, scene, src, show_progress=False)
+  more = dataclasses.replace(config, num_rounds=2)  # the same run, one round further
+  renerf.copy_baseline(more, src, dst)
+  # Another D recipe, or another B: nothing is copied.
+  assert renerf.copy_finished_rounds(dataclasses.replace(more, pseudo_schedule='all'),
+                                     src, dst) == []
+  other_b = str(tmp_path / 'other_b')
+  renerf.run_rounds(dataclasses.replace(config, num_rounds=0, seed=4), scene, other_b,
+                    show_progress=False)
+  assert renerf.copy_finished_rounds(more, src, other_b) == []
+  assert not os.path.exists(os.path.join(dst, 'round_1'))
+  assert renerf.copy_finished_rounds(more, src, dst) == [1]  # round 2 is not in src
+  copied = _files(os.path.join(dst, 'round_1'))
+  assert copied.pop('copied_from.json')
+  assert copied == _files(os.path.join(src, 'round_1'))
+  assert renerf.copy_finished_rounds(more, src, dst) == []  # already there
+  state = renerf.run_rounds(more, scene, dst, show_progress=False)  # trains round 2 only
+  assert len(state.metrics) == 3 and rundir.is_done(os.path.join(dst, 'round_2'))
+  assert state.metrics[1] == renerf.run_rounds(config, scene, src,
+                                               show_progress=False).metrics[1]

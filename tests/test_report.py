@@ -128,7 +128,7 @@ def test_plots_are_valid_pngs(tmp_path):
   assert img.std() > 0  # not a blank canvas
   path2 = tmp_path / 'metrics.png'
   report.plot_metrics_vs_time(
-      {'psnr': curves, 'ssim': {'ours': [(1., .5), (2., .6)]},
+      {'psnr': curves, 'ssim': {'ours': [(1., .5, .02), (2., .6, .03)]},  # error bars
        'lpips': {'ours': [(1., .4), (2., .3)]}}, path2, title='run')
   img2 = iio.imread(path2)
   assert img2.shape[1] > img2.shape[0]  # three side-by-side panels

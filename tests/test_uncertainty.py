@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from renerf_jax import memo
 from renerf_jax import uncertainty as unc
 from renerf_jax.configs import Config
 from renerf_jax.datasets import load_scene, ray_pool
@@ -219,7 +220,7 @@ def test_hessian_pass_is_shared_only_when_nothing_it_depends_on_differs(setup, m
   calls = []
   real = unc.hessian_diagonal
   monkeypatch.setattr(unc, 'hessian_diagonal', lambda *a, **k: calls.append(1) or real(*a, **k))
-  monkeypatch.setattr(unc, '_HESSIAN_CACHE', type(unc._HESSIAN_CACHE)())
+  monkeypatch.setattr(unc, '_HESSIAN_CACHE', memo.LruCache(max_items=unc.HESSIAN_CACHE_SIZE))
   pseudo = take(pool['rays'], np.arange(1, 600, 7))
   first = unc.compute_masks(config, params, pool['rays'], pseudo, -1., 1., hessian_chunk=8)
   # Another view-selection variant of the same baseline: other pseudo-views and keep
