@@ -5,9 +5,18 @@ previous round's pseudo-views), and the baseline trained for the same total wall
 the rounds (the control that tells "more compute" from "Re-Nerfing"). Mean +- std over
 seeds with a fixed step count per round.
 
-Fern on the 2-core CPU with the small table config (llff3_small_renerf.gin, see
-table_why.py) and the Laplace masks on (the full method),
-experiments/results/fern_rounds_small.md. The rounds of three seeds took 49 min (an
+Fern on the 2-core CPU with the hour-budget table config (llff3_tiny_renerf.gin: the
+small config at 126x94 with 512 rays a step) and the Laplace masks on (the full method),
+experiments/results/fern_rounds_tiny.md, in one invocation of 53 min (rounds
+26.6 min, equal-time control 26.5 min; a masked round 2.4 min):
+
+  python experiments/renerf_rounds.py --name fern_rounds_tiny \
+    --config gin_configs/llff3_tiny_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --scene fern --seeds 0 1 2 --variant 'Re-Nerfing (masks)=Config.use_masks=True'
+
+With the small table config (llff3_small_renerf.gin, see table_why.py: 252x189, 1024
+rays a step), the same table is experiments/results/fern_rounds_small.md, which takes
+longer than an hour. The rounds of three seeds took 49 min (an
 invocation of 17 min, killed and resumed by a second of 32 min), the equal-time control
 39 min more (a third invocation, without --no_equal_time: it reuses the finished rounds):
 

@@ -140,6 +140,9 @@ def run_seed(config, scene, run_dir, share_from=()):
     if os.path.isfile(path):
       rounds_from = os.path.dirname(report.read_json(path)['from'])
   state = renerf.run_rounds(config, scene, run_dir)
+  # The next run's Config (seed, variant) differs, so none of this run's executables is
+  # called again; kept, their memory mappings pile up over a table's runs.
+  jit_cache.release_compiled()
   return list(state.metrics), copied, rounds_from
 
 

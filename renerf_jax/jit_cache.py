@@ -41,3 +41,29 @@ def enable_compilation_cache(path=None):
   jax.config.update('jax_persistent_cache_min_compile_time_secs', MIN_COMPILE_SECONDS)
   jax.config.update('jax_persistent_cache_min_entry_size_bytes', 0)
   return path
+
+
+def mapped_regions():
+  """Number of memory mappings of this process (lines of /proc/self/maps; None where
+  the file does not exist, e.g. off Linux)."""
+  try:
+    with open('/proc/self/maps', 'rb') as f:
+      return sum(1 for _ in f)
+  except OSError:
+    return None
+
+
+def release_compiled():
+  """Drops every in-memory compiled executable (jax.clear_caches) and frees them.
+
+  Each executable XLA's CPU backend compiles holds memory mappings of its own, and a
+  Config is a static argument, so every (variant, seed) of a table compiles its steps
+  afresh and the old ones are never called again. Kept, they pile up: the ten-variant
+  view-selection table died after 26 runs in one process with "LLVM compilation error:
+  Cannot allocate memory" (Linux's limit of 65530 mappings per process). Calling this
+  between runs keeps the count flat; with the persistent cache on, the next run's
+  compiles are cache hits.
+  """
+  import gc  # pylint: disable=g-import-not-at-top
+  jax.clear_caches()
+  gc.collect()

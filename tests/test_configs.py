@@ -100,3 +100,19 @@ def test_small_table_config_is_the_fast_one_smaller():
            'anneal_nearfar_steps', 'lr_delay_steps', 'depth_tv_maxstep', 'pseudo_until',
            'eval_every', 'eval_stride', 'checkpoint_every', 'hessian_rays', 'lpips_nets')
   assert dataclasses.replace(small, **{k: getattr(fast, k) for k in sizes}) == fast
+
+
+def test_tiny_table_config_is_the_small_one_at_quarter_resolution():
+  """llff3_tiny_renerf.gin (the hour-budget tables): the small table config at a quarter of
+  the resolution with half the rays per step and half the Hessian rays; the schedule, the
+  regularisers and the Re-Nerfing settings are the small config's, and the cheap eval
+  sees as many pixels per test view."""
+  import dataclasses
+  tiny = load_config([os.path.join(REPO, 'gin_configs', 'llff3_tiny_renerf.gin')])
+  small = load_config([os.path.join(REPO, 'gin_configs', 'llff3_small_renerf.gin')])
+  assert (tiny.image_downsample, small.image_downsample) == (4, 2)
+  assert tiny.batch_size * 2 == small.batch_size
+  assert tiny.hessian_rays * 2 == small.hessian_rays
+  assert tiny.eval_stride * tiny.image_downsample == small.eval_stride * small.image_downsample
+  sizes = ('image_downsample', 'batch_size', 'hessian_rays', 'eval_stride')
+  assert dataclasses.replace(tiny, **{k: getattr(small, k) for k in sizes}) == small

@@ -48,3 +48,42 @@ def test_cache_off_and_default_dir(monkeypatch):
   assert jit_cache.enable_compilation_cache() is None
   monkeypatch.delenv('RENERF_JAX_CACHE_DIR')
   assert jit_cache.default_cache_dir().endswith(os.path.join('.cache', 'renerf_jax', 'xla'))
+
+
+MAPS_SCRIPT = '''
+import functools, sys
+import jax, jax.numpy as jnp
+from renerf_jax import jit_cache
+release = sys.argv[1] == '1'
+@functools.partial(jax.jit, static_argnums=0)
+def f(k, x):  # A new static k compiles a new executable, as a new Config does.
+  for _ in range(10):
+    x = jnp.sin(x * k) + x
+  return x
+f(-1., jnp.ones(8)).block_until_ready()
+if release:
+  jit_cache.release_compiled()
+before = jit_cache.mapped_regions()
+for k in range(30):
+  f(float(k), jnp.ones(8)).block_until_ready()
+  if release:
+    jit_cache.release_compiled()
+print('growth', jit_cache.mapped_regions() - before)
+'''
+
+
+def _maps_growth(release):
+  env = dict(os.environ, RENERF_JAX_CACHE_DIR='off')
+  out = subprocess.run([sys.executable, '-c', MAPS_SCRIPT, '1' if release else '0'],
+                       cwd=REPO, env=env, capture_output=True, text=True, timeout=300,
+                       check=True).stdout
+  return int(out.split('growth')[-1])
+
+
+def test_release_compiled_keeps_the_memory_mappings_flat():
+  """Each compiled executable holds memory mappings; a table compiles new ones every run
+  (a new Config) and died at Linux's 65530 once. Released between compiles, the count
+  stays flat; kept, it grows with every compile."""
+  kept, released = _maps_growth(False), _maps_growth(True)
+  assert kept >= 30, kept
+  assert released <= 5, released
