@@ -1,8 +1,10 @@
 """Evaluates a finished run: python eval.py --gin_configs=... [--run_dir=...]
 
-Renders every test view of every finished round, writes per-image and mean PSNR / SSIM /
-LPIPS (JSON + markdown) into round_<r>/eval/, prints the rounds table and the error
-against run time table, and plots error_vs_time.png in the run directory.
+Reads the per-image and mean PSNR / SSIM / LPIPS that every finished round wrote into
+round_<r>/eval/ (a finished round's outputs are never rewritten). A round whose metrics
+lack one of Config.lpips_nets (a resumable field) is rendered again into
+round_<r>/eval_extra/ instead. Prints the rounds table and the error against run time
+table, writes eval_rounds.json/.md and plots error_vs_time.png in the run directory.
 """
 import os
 import sys
@@ -11,7 +13,8 @@ from renerf_jax import cli, report, rundir
 from renerf_jax.configs import exit_on_error
 from renerf_jax.datasets import load_scene
 from renerf_jax.evaluation import evaluate_test_views
-from renerf_jax.renerf import initial_state, load_round, round_config, round_dir, rounds_table
+from renerf_jax.renerf import initial_state, round_config, rounds_table
+from renerf_jax.resume import load_round, round_dir
 
 
 def curve_rows(run_dir, n_rounds):
@@ -25,12 +28,25 @@ def curve_rows(run_dir, n_rounds):
   return rows
 
 
+def round_eval_dir(config, scene, params, rdir, r):
+  """The folder of round r's test metrics: eval/ as the round wrote it, or, when those
+  lack one of config.lpips_nets, eval_extra/ (rendered here once, then reused)."""
+  wanted = {f'lpips_{n}' for n in config.lpips_nets} | {'psnr', 'ssim'}
+  for name in ('eval', 'eval_extra'):
+    path = os.path.join(rdir, name, 'metrics.json')
+    if os.path.isfile(path) and wanted <= set(report.read_json(path)['mean']):
+      return os.path.dirname(path)
+  out = os.path.join(rdir, 'eval_extra')
+  evaluate_test_views(round_config(config, r), scene, params, out)
+  return out
+
+
 @exit_on_error
 def main(argv=None):
   config, run_dir = cli.setup(argv, __doc__)
   cli.check_run_dir(config, run_dir, create=False)
   scene = load_scene(config)
-  state = initial_state(config)
+  state = initial_state()
   metrics = []
   for r in range(config.num_rounds + 1):
     rdir = round_dir(run_dir, r)
@@ -39,12 +55,13 @@ def main(argv=None):
             file=sys.stderr)
       break
     state = load_round(config, rdir, state)
-    ev = evaluate_test_views(round_config(config, r), scene, state.params,
-                             os.path.join(rdir, 'eval'))
+    ev_dir = round_eval_dir(config, scene, state.params, rdir, r)
+    mean = report.read_json(os.path.join(ev_dir, 'metrics.json'))['mean']
     saved = state.metrics[-1]
-    metrics.append(dict(ev['mean'], round=r, round_seconds=saved['round_seconds'],
+    metrics.append(dict(mean, round=r, round_seconds=saved['round_seconds'],
                         cumulative_seconds=saved['cumulative_seconds']))
-    print(f'round {r}:\n' + open(os.path.join(rdir, 'eval', 'metrics.md')).read())
+    with open(os.path.join(ev_dir, 'metrics.md')) as f:
+      print(f'round {r}:\n' + f.read())
   if not metrics:
     raise SystemExit(f'error: no finished round in {run_dir}')
   table = rounds_table(metrics)

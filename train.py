@@ -2,10 +2,10 @@
 import os
 import sys
 
-from renerf_jax import cli, report
+from renerf_jax import cli, report, resume
 from renerf_jax.configs import exit_on_error
 from renerf_jax.datasets import load_scene
-from renerf_jax.renerf import check_rounds_config, rounds_table, run_rounds
+from renerf_jax.renerf import check_rounds_config, rounds_table
 
 
 @exit_on_error
@@ -16,7 +16,7 @@ def main(argv=None):
   cli.check_run_dir(config, run_dir, create=True)
   print(f'scene {scene.name}: {len(scene.train_idx)} train / {len(scene.test_idx)} test '
         f'views at {scene.width}x{scene.height}; run directory {run_dir}', file=sys.stderr)
-  state = run_rounds(config, scene, run_dir)
+  state = resume.run_rounds(config, scene, run_dir)
   table = rounds_table(state.metrics)
   report.write_json(os.path.join(run_dir, 'rounds.json'), list(state.metrics))
   report.write_markdown(os.path.join(run_dir, 'rounds.md'), table + '\n')

@@ -1,6 +1,6 @@
 """What the persistent compilation cache (renerf_jax/jit_cache.py) saves per train step.
 
-python benchmarks/bench_compile_cache.py --config gin_configs/llff3_small_renerf.gin \
+python benchmarks/bench_compile_cache.py --config experiments/configs/table_small.gin \
   --gin_bindings "Config.data_dir='../shared/data/nerf_llff_data'"
 
 Each measurement runs in a fresh process: the cache off, the cache on in an empty
@@ -62,7 +62,7 @@ def run_child(args, cache_dir):
 def main():
   p = argparse.ArgumentParser(description=__doc__,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-  p.add_argument('--config', default='gin_configs/llff3_small_renerf.gin')
+  p.add_argument('--config', default='experiments/configs/table_small.gin')
   p.add_argument('--gin_bindings', action='append', default=[])
   p.add_argument('--out', default='benchmarks/results/compile_cache')
   p.add_argument('--child', action='store_true', help=argparse.SUPPRESS)

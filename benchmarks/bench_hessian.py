@@ -1,4 +1,4 @@
-"""Throughput of the Laplace Hessian pass (renerf_jax.uncertainty.hessian_diagonal).
+"""Throughput of the Laplace Hessian pass (renerf_jax.laplace.hessian_diagonal).
 
 Times the Gauss-Newton diagonal over --rays training rays of the configured scene, after
 one compile call, keeping the best of --repeats (the CPU is shared), and prints one JSON
@@ -18,8 +18,9 @@ import numpy as np
 
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
+from renerf_jax.deformation import grid_size
 from renerf_jax.fields import init_field_params
-from renerf_jax.uncertainty import grid_size, hessian_diagonal, subsample_rays
+from renerf_jax.laplace import hessian_diagonal, subsample_rays
 
 
 def scene_box(scene, rays):

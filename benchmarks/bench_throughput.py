@@ -30,7 +30,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # pylint: disable=g-import-not-at-top
 from benchmarks.bench_train_step import matmul_gflops
-from renerf_jax import report, training, uncertainty
+from renerf_jax import deformation, laplace, report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.fields import init_field_params
@@ -104,11 +104,11 @@ def bench_hessian(config, scene, rays, params, chunk, repeats):
   lo, hi = (np.asarray(b, np.float32) for b in scene.bbox)
   part = jax.tree_util.tree_map(lambda x: x[:chunk], rays)
   valid = np.ones((chunk,), np.float32)
-  zeros = lambda: np.zeros((uncertainty.grid_size(log2_res), 3), np.float32)
+  zeros = lambda: np.zeros((deformation.grid_size(log2_res), 3), np.float32)
   args = lambda: (cfg, log2_res, params, part, valid, lo, hi, zeros(), zeros())
   # pylint: disable=protected-access
-  compile_s, gflop = _compile(uncertainty._hessian_chunk, *args())
-  sec = _time_calls(lambda: uncertainty._hessian_chunk(*args()), repeats)
+  compile_s, gflop = _compile(laplace._hessian_chunk, *args())
+  sec = _time_calls(lambda: laplace._hessian_chunk(*args()), repeats)
   row = _row(config, 'hessian', chunk, sec, gflop, compile_s)
   row['samples'] += f', grid 2^{log2_res}+1'
   return row

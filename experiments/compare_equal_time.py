@@ -29,7 +29,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from renerf_jax import jit_cache, report, training  # pylint: disable=g-import-not-at-top
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax.renerf import make_pools, run_rounds
+from renerf_jax.renerf import make_pools
+from renerf_jax.resume import run_rounds
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 

@@ -7,7 +7,8 @@ GIF (imageio) and a PNG of the middle frame. Fern, after renerf_rounds.py:
 
   python experiments/render_video.py \
     --run_dir experiments/results/fern_rounds_fast/Re-Nerfing/seed0 \
-    --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --config gin_configs/llff3_fast.gin gin_configs/renerf.gin \
+    --data_dir ../shared/data/nerf_llff_data \
     --scene fern --out experiments/results/fern_rounds_fast_video.gif
 """
 import argparse
@@ -24,7 +25,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # pylint: disable=g-import-not-at-top
 from experiments.tables import bindings_of
 from renerf_jax import poses as pose_lib
-from renerf_jax import renerf, report, rundir, training
+from renerf_jax import renerf, report, resume, rundir, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import camera_rays, load_scene
 from renerf_jax.progress import progress_bar
@@ -32,7 +33,7 @@ from renerf_jax.rendering import render_image
 
 
 def load_params(config, run_dir, r):
-  rdir = renerf.round_dir(run_dir, r)
+  rdir = resume.round_dir(run_dir, r)
   if not rundir.is_done(rdir):
     raise SystemExit(f'error: {rdir} is not a finished round')
   template = training.init_state(renerf.round_config(config, r),
@@ -43,7 +44,7 @@ def load_params(config, run_dir, r):
 
 def finished_rounds(run_dir):
   r = 0
-  while rundir.is_done(renerf.round_dir(run_dir, r)):
+  while rundir.is_done(resume.round_dir(run_dir, r)):
     r += 1
   return r
 
@@ -63,7 +64,8 @@ def run_parser(description):
   p = argparse.ArgumentParser(description=description,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument('--run_dir', required=True)
-  p.add_argument('--config', required=True)
+  p.add_argument('--config', required=True, nargs='+',
+                 help='gin config file(s) of the run, stacked in order')
   p.add_argument('--gin_bindings', action='append', default=[])
   p.add_argument('--data_dir', help='shortcut for Config.data_dir')
   p.add_argument('--scene', help='shortcut for Config.scene')
@@ -72,7 +74,7 @@ def run_parser(description):
 
 def run_config(args):
   """The Config of run_parser's flags."""
-  return load_config([args.config], bindings_of(args))
+  return load_config(args.config, bindings_of(args))
 
 
 def main():

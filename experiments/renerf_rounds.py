@@ -5,23 +5,24 @@ previous round's pseudo-views), and the baseline trained for the same total wall
 the rounds (the control that tells "more compute" from "Re-Nerfing"). Mean +- std over
 seeds with a fixed step count per round.
 
-Fern on the 2-core CPU with the hour-budget table config (llff3_tiny_renerf.gin: the
-small config at 126x94 with 512 rays a step) and the Laplace masks on (the full method),
+Fern on the 2-core CPU with the hour-budget table config
+(experiments/configs/table_tiny.gin: the small config at 126x94 with 512 rays a step)
+and the Laplace masks on (the full method),
 experiments/results/fern_rounds_tiny.md, in one invocation of 53 min (rounds
 26.6 min, equal-time control 26.5 min; a masked round 2.4 min):
 
   python experiments/renerf_rounds.py --name fern_rounds_tiny \
-    --config gin_configs/llff3_tiny_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --config experiments/configs/table_tiny.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 --variant 'Re-Nerfing (masks)=Config.use_masks=True'
 
-With the small table config (llff3_small_renerf.gin, see table_why.py: 252x189, 1024
+With the small table config (table_small.gin, see table_why.py: 252x189, 1024
 rays a step), the same table is experiments/results/fern_rounds_small.md, which takes
 longer than an hour. The rounds of three seeds took 49 min (an
 invocation of 17 min, killed and resumed by a second of 32 min), the equal-time control
 39 min more (a third invocation, without --no_equal_time: it reuses the finished rounds):
 
   python experiments/renerf_rounds.py --name fern_rounds_small \
-    --config gin_configs/llff3_small_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --config experiments/configs/table_small.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 \
     --variant 'Re-Nerfing (masks)=Config.use_masks=True' [--no_equal_time]
 
@@ -35,8 +36,8 @@ gin_configs`) and run
     --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 --gin_bindings "Config.lr_final = 1e-3"
 
-Paper scale: --config gin_configs/llff3_renerf.gin. See experiments/tables.py for the run
-directories, baseline sharing and the equal-time rule.
+Paper scale: --config gin_configs/llff3.gin gin_configs/renerf.gin. See
+experiments/tables.py for the run directories, baseline sharing and the equal-time rule.
 """
 import os
 import sys

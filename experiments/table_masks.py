@@ -5,23 +5,23 @@ views", Config.pseudo_schedule='all'), removed at step K ("stop aug. views", the
 and removed at K with the Laplace-uncertainty masks ("+ masks", Config.use_masks=True:
 the Hessian pass runs and the most uncertain pixels are left out of the loss). The three
 variants share one baseline per seed (taken from the rounds table with --baseline_from).
-Fern on the 2-core CPU with the hour-budget table config (llff3_tiny_renerf.gin: 126x94,
+Fern on the 2-core CPU with the hour-budget table config (table_tiny.gin: 126x94,
 512 rays a step), baselines and '+ masks' from its rounds table: 8.9 min for three
 seeds, experiments/results/fern_masks_tiny.md:
 
   python experiments/table_masks.py --name fern_masks_tiny \
-    --config gin_configs/llff3_tiny_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --config experiments/configs/table_tiny.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 \
     --baseline_from 'experiments/results/fern_rounds_tiny/Re-Nerfing (masks)/seed{seed}'
 
-With the small table config (llff3_small_renerf.gin, see table_why.py), baselines and
+With the small table config (table_small.gin, see table_why.py), baselines and
 the '+ masks' rounds taken from the rounds table
 (renerf_rounds.py: the same config with Config.use_masks=True, so its R1 is this
 table's '+ masks' and is copied, not trained again): 21.5 min for three seeds,
 experiments/results/fern_masks_small.md:
 
   python experiments/table_masks.py --name fern_masks_small \
-    --config gin_configs/llff3_small_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --config experiments/configs/table_small.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 \
     --baseline_from 'experiments/results/fern_rounds_small/Re-Nerfing (masks)/seed{seed}'
 

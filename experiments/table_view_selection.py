@@ -7,7 +7,7 @@ many random unobserved poses. The presets overlap (7x holds 5x, 3x_b and 3x_c; 1
 7x): within one process each view is rendered once (pseudo_views.render_pseudo_views),
 and a variant still counts the seconds its views took.
 
-Fern on the 2-core CPU with the hour-budget table config (llff3_tiny_renerf.gin: 126x94,
+Fern on the 2-core CPU with the hour-budget table config (table_tiny.gin: 126x94,
 512 rays a step), baselines from its rounds table (renerf_rounds.py): 49.6 min for
 three seeds, experiments/results/fern_views_tiny.md. The first invocation of the command
 below died after 42.7 min and 26 of the 30 rounds ("LLVM compilation error: Cannot
@@ -16,11 +16,11 @@ Linux's 65530, fixed since by jit_cache.release_compiled between runs); the same
 resumed with the fix and finished the last four rounds in 6.9 min:
 
   python experiments/table_view_selection.py --name fern_views_tiny \
-    --config gin_configs/llff3_tiny_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --config experiments/configs/table_tiny.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 \
     --baseline_from 'experiments/results/fern_rounds_tiny/Re-Nerfing (masks)/seed{seed}'
 
-With the small table config (llff3_small_renerf.gin, see table_why.py: 252x189, 1024
+With the small table config (table_small.gin, see table_why.py: 252x189, 1024
 rays a step), baselines from the rounds table (renerf_rounds.py): ten rounds of
 2.3-2.6 min per seed (training ~2 min, evaluation ~18 s, a new pseudo-view ~4.5 s),
 87 min for three seeds, experiments/results/fern_views_small.md. The runs resume, so it
@@ -30,7 +30,7 @@ collects them (21 s). The presets that hold one another ran in the same invocati
 that they share their views; the second took its baselines from the first's 7x runs, so
 that the table shows one baseline row:
 
-  C="--name fern_views_small --config gin_configs/llff3_small_renerf.gin \
+  C="--name fern_views_small --config experiments/configs/table_small.gin \
      --data_dir ../shared/data/nerf_llff_data --scene fern --seeds 0 1 2"
   python experiments/table_view_selection.py $C \
     --baseline_from 'experiments/results/fern_rounds_small/Re-Nerfing (masks)/seed{seed}' \

@@ -6,18 +6,18 @@ Round 1 variants on top of one shared baseline per seed:
   no reset              D continues from B's parameters (pseudo-views until K)
   reset + keep views    pseudo-views kept to the end (Config.pseudo_schedule='all')
   reset + add late      pseudo-views only in the last K steps ('late')
-Fern on the 2-core CPU with the small table config (llff3_small_renerf.gin: the fast grid
-backbone at half resolution, 400 steps): measured 45 min for three seeds (12.6 min for
-seed 0 alone on an idle CPU; seeds 1 and 2 shared the CPU with the test suite for part
-of their time), experiments/results/fern_why_small.md:
+Fern on the 2-core CPU with the small table config (experiments/configs/table_small.gin:
+the fast grid backbone at half resolution, 400 steps): measured 45 min for three seeds
+(12.6 min for seed 0 alone on an idle CPU; seeds 1 and 2 shared the CPU with the test
+suite for part of their time), experiments/results/fern_why_small.md:
 
   python experiments/table_why.py --name fern_why_small \
-    --config gin_configs/llff3_small_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --config experiments/configs/table_small.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2
 
-With the full-resolution fast config (--config gin_configs/llff3_fast_renerf.gin) a seed
-should take about four times as long (4x the rays trained, 4x the pixels rendered;
-estimated, not measured).
+With the full-resolution fast config (--config gin_configs/llff3_fast.gin
+gin_configs/renerf.gin) a seed should take about four times as long (4x the rays
+trained, 4x the pixels rendered; estimated, not measured).
 
 The paper's numbers for this table are not in the script: the project has only its
 Table 1 numbers (renerf_rounds.py).

@@ -6,14 +6,14 @@ seeds. Runs live in <out>/<name>/<variant>/seed<k> (train.py-style run directori
 config.json: resumable, finished rounds are never rewritten, a directory made with
 another config is refused).
 
-Variants that differ only from round 1 on have the same baseline (renerf.ROUND_FIELDS):
-it is trained once per seed and copied (renerf.copy_baseline) into the other variants'
+Variants that differ only from round 1 on have the same baseline (sharing.ROUND_FIELDS):
+it is trained once per seed and copied (sharing.copy_baseline) into the other variants'
 directories, and can be taken from another table's runs with --baseline_from (e.g. the
 rounds table's). A copied baseline is the same model bit for bit, so sharing changes no
 number; its row is shown once.
 Round 1's pseudo-views (and masks) are shared the same way between variants that agree on
-renerf.PSEUDO_VIEW_FIELDS (e.g. the masks table's 'augmented views' and 'stop aug. views'):
-rendered once per seed, the copy keeps their render seconds in the cumulative time.
+every field but sharing.NOT_PSEUDO_VIEW_FIELDS (e.g. the masks table's 'augmented views'
+and 'stop aug. views'): rendered once per seed, the copy keeps their render seconds in the cumulative time.
 
 Optionally (--equal_time) the baseline is also trained for the same total wall time as
 the rounds of the first variant (training + pseudo-view synthesis + uncertainty): a FIXED
@@ -36,9 +36,11 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from renerf_jax import cli, jit_cache, renerf, report, rundir  # pylint: disable=g-import-not-at-top
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from renerf_jax import cli, jit_cache, report, resume, rundir  # pylint: disable=g-import-not-at-top
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
+import sharing  # pylint: disable=g-import-not-at-top,g-bad-import-order
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 NAMES = {'psnr': 'PSNR', 'ssim': 'SSIM', 'lpips_alex': 'LPIPS-alex', 'lpips_vgg': 'LPIPS-vgg'}
@@ -48,7 +50,10 @@ def parser(description, default_rounds):
   p = argparse.ArgumentParser(description=description,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument('--name', required=True, help='results name under --out')
-  p.add_argument('--config', required=True, help='gin config (a *_renerf.gin)')
+  p.add_argument('--config', required=True, nargs='+',
+                 help='gin config file(s), stacked in order (e.g. experiments/configs/'
+                      'table_tiny.gin, or gin_configs/llff3_fast.gin gin_configs/'
+                      'renerf.gin); a bare name is looked up in gin_configs/')
   p.add_argument('--gin_bindings', action='append', default=[])
   p.add_argument('--data_dir', help='shortcut for Config.data_dir')
   p.add_argument('--scene', help='shortcut for Config.scene')
@@ -77,7 +82,7 @@ def bindings_of(args):
 
 
 def base_config(args):
-  return load_config([args.config], bindings_of(args))
+  return load_config(args.config, bindings_of(args))
 
 
 def mean_std(vals):
@@ -93,7 +98,7 @@ def curve_of(run_dir, rounds):
   """(cumulative seconds, cheap test PSNR) over the rounds of one run."""
   pts = []
   for r in range(rounds + 1):
-    path = os.path.join(renerf.round_dir(run_dir, r), 'result.json')
+    path = os.path.join(resume.round_dir(run_dir, r), 'result.json')
     pts += [(c['time'], c['eval_psnr']) for c in report.read_json(path)['curve']]
   return pts
 
@@ -102,11 +107,11 @@ def run_seed(config, scene, run_dir, share_from=()):
   """Rounds of one (variant, seed); round_0 copied from a matching finished run if any.
 
   Round 1's pseudo-views are copied too from a run in share_from with the same baseline
-  and pseudo-view settings (renerf.share_pseudo_views): variants that differ only in how
+  and pseudo-view settings (sharing.share_pseudo_views): variants that differ only in how
   D is trained render them once per seed.
 
   Whole finished rounds are copied from a run in share_from made with the same config
-  (renerf.copy_finished_rounds), e.g. the masks table's '+ masks' from the rounds table.
+  (sharing.copy_finished_rounds), e.g. the masks table's '+ masks' from the rounds table.
 
   Returns:
     (list of per-round metrics, the run directory round_0 was copied from or None, the
@@ -114,13 +119,13 @@ def run_seed(config, scene, run_dir, share_from=()):
   """
   cli.check_run_dir(config, run_dir, create=True)
   copied = None
-  if not os.path.exists(renerf.round_dir(run_dir, 0)):
+  if not os.path.exists(resume.round_dir(run_dir, 0)):
     for src in share_from:
       cfg_path = os.path.join(src, 'config.json')
       if (os.path.abspath(src) != os.path.abspath(run_dir)
-          and rundir.is_done(renerf.round_dir(src, 0)) and os.path.isfile(cfg_path)
-          and not renerf.baseline_differences(config, report.read_json(cfg_path))):
-        renerf.copy_baseline(config, src, run_dir)
+          and rundir.is_done(resume.round_dir(src, 0)) and os.path.isfile(cfg_path)
+          and not sharing.baseline_differences(config, report.read_json(cfg_path))):
+        sharing.copy_baseline(config, src, run_dir)
         copied = src
         break
   elif os.path.isfile(os.path.join(run_dir, 'shared_baseline.json')):
@@ -128,18 +133,19 @@ def run_seed(config, scene, run_dir, share_from=()):
   if copied:
     report.write_json(os.path.join(run_dir, 'shared_baseline.json'), {'from': copied})
   rounds_from = None
-  if config.num_rounds > 0 and rundir.is_done(renerf.round_dir(run_dir, 0)):
+  if config.num_rounds > 0 and rundir.is_done(resume.round_dir(run_dir, 0)):
     for src in share_from:  # Whole rounds, if another run made them with this config.
-      if renerf.copy_finished_rounds(config, src, run_dir):
+      if sharing.copy_finished_rounds(config, src, run_dir):
         break
     for src in share_from:  # Round 1's pseudo-views, if another variant made the same.
-      if renerf.share_pseudo_views(config, src, run_dir):
+      if sharing.share_pseudo_views(config, src, run_dir):
         break
   for r in range(1, config.num_rounds + 1):
-    path = os.path.join(renerf.round_dir(run_dir, r), 'copied_from.json')
+    path = os.path.join(resume.round_dir(run_dir, r), 'copied_from.json')
     if os.path.isfile(path):
       rounds_from = os.path.dirname(report.read_json(path)['from'])
-  state = renerf.run_rounds(config, scene, run_dir)
+  state = resume.run_rounds(config, scene, run_dir,
+                            synthesize_fn=sharing.memo_synthesize)
   # The next run's Config (seed, variant) differs, so none of this run's executables is
   # called again; kept, their memory mappings pile up over a table's runs.
   jit_cache.release_compiled()
@@ -190,14 +196,14 @@ def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
   jit_cache.enable_compilation_cache()
   bindings = bindings_of(args)
   root = os.path.join(args.out, args.name)
-  results = {'name': args.name, 'config': args.config, 'bindings': bindings,
+  results = {'name': args.name, 'config': ' '.join(args.config), 'bindings': bindings,
              'seeds': args.seeds, 'variants': [], 'command': 'python ' + shlex.join(sys.argv)}
   rows, curves, shared_rows, summaries, copied_rounds = [], {}, set(), {}, {}
   first_runs = None
   for vi, spec in enumerate(variants):
     label, _, extra = spec.partition('=')
     extra = [b for b in extra.split(';') if b.strip()]
-    config = load_config([args.config], bindings + extra)
+    config = load_config(args.config, bindings + extra)
     if not any(b.replace(' ', '').startswith('Config.num_rounds=') for b in extra):
       config = dataclasses.replace(config, num_rounds=args.rounds)
     scene = load_scene(config)
@@ -299,7 +305,8 @@ def markdown(args, rows, paper, shared_rows, paper_note, command):
           + ([('paper', 'paper PSNR / SSIM / LPIPS')] if paper else []))
   shared = (f" The baseline row stands for the baseline of {', '.join(sorted(shared_rows))} "
             f'too (copied, the same model).' if shared_rows else '')
-  return (f'# {args.name}\n\nConfig `{args.config}` {bindings_of(args)}, seeds {args.seeds}; '
+  return (f'# {args.name}\n\nConfig `{" ".join(args.config)}` {bindings_of(args)}, '
+          f'seeds {args.seeds}; '
           f'mean +- std over seeds (fixed step counts per round). cum. s: cumulative wall '
           f'seconds (training + pseudo-views + uncertainty). dPSNR: against the first row; '
           f'* = larger than the seed spread (the larger std of the two rows); a gain '

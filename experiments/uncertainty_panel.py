@@ -10,7 +10,8 @@ Fern, after renerf_rounds.py:
 
   python experiments/uncertainty_panel.py \
     --run_dir experiments/results/fern_rounds_fast/Re-Nerfing/seed0 \
-    --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
+    --config gin_configs/llff3_fast.gin gin_configs/renerf.gin \
+    --data_dir ../shared/data/nerf_llff_data \
     --scene fern --work_dir /tmp/fern_masks --out experiments/results/fern_uncertainty
 """
 import dataclasses
@@ -22,7 +23,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # pylint: disable=g-import-not-at-top
 from experiments.render_video import load_params, run_config, run_parser
-from renerf_jax import renerf, report
+from renerf_jax import report, resume
 from renerf_jax.datasets import load_scene
 from renerf_jax.pseudo_views import side_by_side, uncertainty_heatmap
 
@@ -40,8 +41,8 @@ def main(argv=None):
                      'a finished run is never written to')
   scene = load_scene(config)
   params = load_params(config, args.run_dir, args.round)
-  pv, seconds = renerf.synthesize(config, scene, params, args.work_dir)
-  timing = report.read_json(os.path.join(args.work_dir, 'timing.json'))
+  pv, timing, _ = resume.stored_synthesis(args.work_dir)(config, scene, params, True)
+  seconds = timing['seconds']
   n = pv.images.shape[0]
   bad = [v for v in args.views if not 0 <= v < n]
   if bad:
@@ -54,7 +55,7 @@ def main(argv=None):
   out = dict(timing, views=args.views, run_dir=args.run_dir, round=args.round,
              hessian_rays=config.hessian_rays, deform_log2_res=config.deform_log2_res,
              command='python ' + ' '.join(sys.argv))
-  nxt = os.path.join(renerf.round_dir(args.run_dir, args.round + 1), 'result.json')
+  nxt = os.path.join(resume.round_dir(args.run_dir, args.round + 1), 'result.json')
   if os.path.isfile(nxt):
     round_s = report.read_json(nxt)['metrics']['round_seconds']
     out['next_round_seconds_without_masks'] = round_s

@@ -20,7 +20,7 @@ import numpy as np
 import matplotlib.pyplot as plt
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax import renerf, report
+from renerf_jax import renerf, report, resume
 
 SMALL = os.environ.get('RENERF_NOTEBOOK_SMALL') == '1'
 repo = os.path.abspath('..')
@@ -38,7 +38,7 @@ for k, i in enumerate(scene.train_idx):
   plt.subplot(1, len(scene.train_idx), k + 1); plt.imshow(scene.images[i]); plt.axis('off')
 plt.suptitle('the three training views'); plt.show()'''),
     ('code', '''run_dir = tempfile.mkdtemp(prefix='renerf_quickstart_')
-state = renerf.run_rounds(config, scene, run_dir)
+state = resume.run_rounds(config, scene, run_dir)
 print(renerf.rounds_table(state.metrics))'''),
     ('md', '## Pseudo-views, their uncertainty and masks'),
     ('code', '''pv = state.pseudo
@@ -70,7 +70,7 @@ sys.path.insert(0, os.path.abspath('..'))
 import matplotlib.pyplot as plt
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax import renerf
+from renerf_jax import renerf, resume
 
 DATA_DIR = os.environ.get('RENERF_DATA_DIR', os.path.abspath('../../shared/data/nerf_llff_data'))
 SCENE = os.environ.get('RENERF_SCENE', 'fern')
@@ -83,7 +83,7 @@ config = load_config([os.path.abspath('../gin_configs/llff3_cpu.gin')], bindings
 scene = load_scene(config)
 print(scene.name, scene.images.shape, 'train', scene.train_idx, 'test', scene.test_idx)'''),
     ('code', '''run_dir = tempfile.mkdtemp(prefix='renerf_byo_')
-state = renerf.run_rounds(config, scene, run_dir)
+state = resume.run_rounds(config, scene, run_dir)
 print(renerf.rounds_table(state.metrics))'''),
     ('code', '''img = plt.imread(os.path.join(run_dir, 'round_0', 'eval', f'test_{scene.test_idx[0]:03d}.png'))
 plt.figure(figsize=(10, 4))

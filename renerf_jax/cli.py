@@ -3,14 +3,9 @@ import dataclasses
 import os
 
 from renerf_jax import jit_cache, report
-from renerf_jax.configs import config_to_gin, default_run_dir, load_config, parse_args
+from renerf_jax.configs import (config_differences, config_to_gin, default_run_dir,
+                                fields_where, load_config, parse_args)
 from renerf_jax.errors import RunDirError
-
-# Fields that may change between invocations on one run directory without invalidating
-# what it holds (more rounds, logging and rendering knobs, the Hessian pass's chunking).
-RESUMABLE_FIELDS = ('num_rounds', 'print_every', 'render_chunk', 'hessian_chunk',
-                    'eval_n_views', 'eval_every', 'eval_stride', 'checkpoint_every',
-                    'lpips_nets')
 
 
 def setup(argv, description):
@@ -25,18 +20,17 @@ def check_run_dir(config, run_dir, create):
   """Guards a run directory against being reused with a different configuration.
 
   The first call writes run_dir/config.json (and the operative gin config); a later call
-  with a configuration differing in anything but RESUMABLE_FIELDS raises RunDirError, so
-  earlier results are never mixed with or overwritten by a different experiment.
+  with a configuration differing in a field that is not 'resumable' (its category in
+  configs.AFFECTS) raises RunDirError, so earlier results are never mixed with or
+  overwritten by a different experiment.
   """
   path = os.path.join(run_dir, 'config.json')
   current = report.to_jsonable(dataclasses.asdict(config))
   if os.path.isfile(path):
-    saved = report.read_json(path)
     # A field added to Config after the run was made counts as its default value.
-    defaults = report.to_jsonable(dataclasses.asdict(type(config)()))
-    saved = dict({k: v for k, v in defaults.items() if k not in saved}, **saved)
-    diff = sorted(k for k in set(saved) | set(current)
-                  if k not in RESUMABLE_FIELDS and saved.get(k) != current.get(k))
+    saved = dict(report.to_jsonable(dataclasses.asdict(type(config)())),
+                 **report.read_json(path))
+    diff = config_differences(config, saved, fields_where('resumable'))
     if diff:
       k = diff[0]
       raise RunDirError(

@@ -16,6 +16,35 @@ import gin
 from renerf_jax.errors import ConfigError, USER_ERRORS
 
 
+# What a Config field can change, declared once per field (its `affects` category) and
+# read by every rule that decides what may be shared or resumed (see fields_where):
+#   baseline   round 0: the baseline's parameters or its reported metrics;
+#   pseudo     round r's pseudo-views or masks, given model B;
+#   hessian    the Hessian pass of the masks, given B and its training rays;
+#   render     the pixels of a pseudo-view rendered at a given pose, given B;
+#   resumable  may change between invocations on one run directory.
+# Fields without a category ('model': data, model, optimisation, regularisers) change
+# everything. Round r >= 1 depends on every field but 'io', 'report', 'rounds' and the
+# chunk sizes' speed (D's training: 'd_training').
+AFFECTS = {
+    'model': ('baseline', 'pseudo', 'hessian', 'render'),
+    'report': ('baseline', 'resumable'),  # what is logged and evaluated, not trained
+    'io': ('resumable',),  # when checkpoints are written
+    'rounds': ('resumable',),  # how many rounds run (each round is the same)
+    'd_training': (),  # how D is trained from the pseudo-views
+    'pseudo_poses': ('pseudo',),  # which pseudo-views are rendered
+    'masks': ('pseudo',),  # whether and how pseudo-view pixels are masked
+    'hessian': ('pseudo', 'hessian'),  # the Laplace approximation
+    'hessian_chunk': ('pseudo', 'hessian', 'resumable'),  # its summation order
+    'render_chunk': ('pseudo', 'render', 'resumable'),  # rendering's batch shapes
+}
+
+
+def _f(default, category: str):
+  """A Config field with its `affects` category (a key of AFFECTS)."""
+  return dataclasses.field(default=default, metadata={'affects': category})
+
+
 @gin.configurable()
 @dataclasses.dataclass(frozen=True)
 class Config:
@@ -102,34 +131,50 @@ class Config:
   grid_box: Tuple[Tuple[float, ...], Tuple[float, ...]] = ((-1., -1., -1.), (1., 1., 1.))
   # Box the grid covers: the NDC cube for LLFF; about +-1.5 for NeRF-synthetic.
   # --- Re-Nerfing ---
-  num_rounds: int = 0  # Re-Nerfing rounds after the baseline (0: baseline only).
-  pseudo_frac: float = 0.5  # Fraction of each batch drawn from pseudo-views while on.
-  pseudo_until: int = 5000  # K: pseudo-view rays only for steps < K (RegNeRF: 5000/69768).
-  pseudo_schedule: str = 'early'  # Table "why": 'early' (steps < K, the method), 'all'
+  num_rounds: int = _f(0, 'rounds')
+  # Re-Nerfing rounds after the baseline (0: baseline only).
+  pseudo_frac: float = _f(0.5, 'd_training')
+  # Fraction of each batch drawn from pseudo-views while on.
+  pseudo_until: int = _f(5000, 'd_training')
+  # K: pseudo-view rays only for steps < K (RegNeRF: 5000/69768).
+  pseudo_schedule: str = _f('early', 'd_training')
+  # Table "why": 'early' (steps < K, the method), 'all'
   # (keep to the end) or 'late' (only the last K steps).
-  renerf_init: str = 'reset'  # 'reset' (D from scratch, the method) or 'continue' (from B).
-  interp_factors: str = '7x'  # Preset name (2x, 3x, 3x_b, 3x_c, 4x, 5x, 7x, 11x) or
+  renerf_init: str = _f('reset', 'd_training')
+  # 'reset' (D from scratch, the method) or 'continue' (from B).
+  interp_factors: str = _f('7x', 'pseudo_poses')
+  # Preset name (2x, 3x, 3x_b, 3x_c, 4x, 5x, 7x, 11x) or
   # comma-separated factors, e.g. '0.25,0.5'.
-  sequencing: str = 'position'  # Neighbour sequencing: ordered, position or rotation.
-  pseudo_targets: str = 'interp'  # 'interp', 'test' (test poses), 'random' or a
+  sequencing: str = _f('position', 'pseudo_poses')
+  # Neighbour sequencing: ordered, position or rotation.
+  pseudo_targets: str = _f('interp', 'pseudo_poses')
+  # 'interp', 'test' (test poses), 'random' or a
   # '+' combination such as 'interp+test'.
-  pseudo_n_random: int = 4  # Random unobserved poses for pseudo_targets 'random'.
+  pseudo_n_random: int = _f(4, 'pseudo_poses')
+  # Random unobserved poses for pseudo_targets 'random'.
   # --- Laplace uncertainty (Bayes' Rays style) and masks ---
-  use_masks: bool = False  # Mask uncertain pseudo-view pixels (runs the Hessian pass).
-  deform_log2_res: int = 8  # L: the deformation grid has (2^L + 1)^3 vertices.
-  hessian_rays: int = 65536  # R: training rays in the Hessian pass.
-  hessian_lambda: float = 1e-4  # Prior precision lambda (keeps Sigma finite).
-  hessian_chunk: int = 1024  # Rays per jitted chunk of the Hessian pass (memory vs speed).
-  mask_keep_frac: float = 0.8  # Keep this fraction of pseudo pixels (mu by bisection)...
-  mask_threshold: float = -1.  # ... unless >= 0: absolute mu on the uncertainty.
+  use_masks: bool = _f(False, 'masks')
+  # Mask uncertain pseudo-view pixels (runs the Hessian pass).
+  deform_log2_res: int = _f(8, 'hessian')
+  # L: the deformation grid has (2^L + 1)^3 vertices.
+  hessian_rays: int = _f(65536, 'hessian')  # R: training rays in the Hessian pass.
+  hessian_lambda: float = _f(1e-4, 'hessian')
+  # Prior precision lambda (keeps Sigma finite).
+  hessian_chunk: int = _f(1024, 'hessian_chunk')
+  # Rays per jitted chunk of the Hessian pass (memory vs speed).
+  mask_keep_frac: float = _f(0.8, 'masks')
+  # Keep this fraction of pseudo pixels (mu by bisection)...
+  mask_threshold: float = _f(-1., 'masks')
+  # ... unless >= 0: absolute mu on the uncertainty.
   # --- logging, evaluation, checkpoints ---
-  print_every: int = 100
-  eval_every: int = 500  # Steps between cheap test PSNR evaluations (0: off).
-  eval_n_views: int = 3  # Test views in the cheap evaluation.
-  eval_stride: int = 4  # Pixel stride of the cheap evaluation (1: full images).
-  checkpoint_every: int = 1000
-  render_chunk: int = 4096  # Rays per chunk when rendering full images.
-  lpips_nets: Tuple[str, ...] = ('alex', 'vgg')
+  print_every: int = _f(100, 'report')
+  eval_every: int = _f(500, 'report')  # Steps between cheap test PSNR evaluations (0: off).
+  eval_n_views: int = _f(3, 'report')  # Test views in the cheap evaluation.
+  eval_stride: int = _f(4, 'report')
+  # Pixel stride of the cheap evaluation (1: full images).
+  checkpoint_every: int = _f(1000, 'io')
+  render_chunk: int = _f(4096, 'render_chunk')  # Rays per chunk when rendering full images.
+  lpips_nets: Tuple[str, ...] = _f(('alex', 'vgg'), 'report')
 
   def __post_init__(self):
     _check(self.dataset_loader in ('llff', 'blender', 'procedural'),
@@ -154,6 +199,36 @@ class Config:
            f'Config.image_downsample={self.image_downsample} must be >= 1')
     _check(self.hessian_chunk >= 1, f'Config.hessian_chunk={self.hessian_chunk} must be >= 1')
     _check(self.render_chunk >= 1, f'Config.render_chunk={self.render_chunk} must be >= 1')
+
+
+def field_category(name: str) -> str:
+  """The `affects` category of Config field `name` ('model' when undeclared)."""
+  return Config.__dataclass_fields__[name].metadata.get('affects', 'model')
+
+
+def fields_where(effect: str, present: bool = True) -> Tuple[str, ...]:
+  """Names of the Config fields whose category has (or, present=False, lacks) `effect`.
+
+  Args:
+    effect: 'baseline', 'pseudo', 'hessian', 'render' or 'resumable'.
+    present: select the fields with the effect (True) or without it (False).
+
+  Returns:
+    Field names in declaration order.
+  """
+  return tuple(f.name for f in dataclasses.fields(Config)
+               if (effect in AFFECTS[field_category(f.name)]) == present)
+
+
+def config_differences(config, saved: dict, ignore=()) -> list:
+  """Names of the fields outside `ignore` in which `config` and a saved config.json
+  differ; a field missing from `saved` (added to Config later) counts as its default."""
+  from renerf_jax.report import to_jsonable  # pylint: disable=g-import-not-at-top
+  current = to_jsonable(dataclasses.asdict(config))
+  defaults = to_jsonable(dataclasses.asdict(type(config)()))
+  saved = dict({k: v for k, v in defaults.items() if k not in saved}, **saved)
+  return sorted(k for k in set(saved) | set(current)
+                if k not in ignore and saved.get(k) != current.get(k))
 
 
 class _DropGinPathProbe(logging.Filter):
@@ -191,11 +266,50 @@ def parse_args(argv: Optional[Sequence[str]] = None, description: str = ''):
   return parser.parse_args(argv)
 
 
+# The repository's gin_configs/ folder: bare --gin_configs names (llff3.gin, llff3) are
+# looked up there, and `include` statements search it after the including file's folder.
+GIN_CONFIGS_DIR = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)),
+                                                '..', 'gin_configs'))
+
+
+def resolve_gin_config(path: str) -> str:
+  """The gin file that --gin_configs=path names.
+
+  path as given (relative to the working directory) if it is a file, else path in
+  GIN_CONFIGS_DIR; either with '.gin' appended when path lacks it.
+
+  Raises:
+    ConfigError: one line naming path and where it was looked for.
+  """
+  names = [path] if path.endswith('.gin') else [path, path + '.gin']
+  candidates = names + ([os.path.join(GIN_CONFIGS_DIR, n) for n in names]
+                        if not os.path.isabs(path) else [])
+  for candidate in candidates:
+    if os.path.isfile(candidate):
+      return candidate
+  where = f'{os.getcwd()}' + ('' if os.path.isabs(path) else f' and {GIN_CONFIGS_DIR}')
+  raise ConfigError(f'gin config file not found: {path} (looked in {where})')
+
+
+def _set_gin_search_path(folders: Sequence[str]):
+  """gin's `include` searches the working directory, then `folders` in this order (and
+  nothing an earlier load_config added)."""
+  folders = list(dict.fromkeys(folders))
+  prefixes = getattr(gin.config, '_LOCATION_PREFIXES', None)
+  if isinstance(prefixes, list):
+    prefixes[:] = [''] + folders
+  else:  # A gin without the list: add what is missing.
+    for folder in folders:
+      gin.add_config_file_search_path(folder)
+
+
 def load_config(gin_configs: Sequence[str] = (), gin_bindings: Sequence[str] = ()) -> Config:
   """Parses gin files and bindings and returns the Config.
 
   Args:
-    gin_configs: paths of .gin files.
+    gin_configs: paths of .gin files; a path that does not exist as given is looked up
+      in the repository's gin_configs/ (resolve_gin_config), so `llff3.gin` or `llff3`
+      works from any directory.
     gin_bindings: binding strings.
 
   Returns:
@@ -204,15 +318,13 @@ def load_config(gin_configs: Sequence[str] = (), gin_bindings: Sequence[str] = (
   Raises:
     ConfigError: naming the missing file or the bad binding.
   """
-  for path in gin_configs:
-    if not os.path.isfile(path):
-      raise ConfigError(f'gin config file not found: {path}')
+  files = [resolve_gin_config(path) for path in gin_configs]
   gin.clear_config()
-  for path in gin_configs:  # `include 'x.gin'` resolves next to the including file.
-    gin.add_config_file_search_path(os.path.dirname(os.path.abspath(path)))
+  # `include 'x.gin'` resolves next to the including file, then in gin_configs/.
+  _set_gin_search_path([os.path.dirname(os.path.abspath(p)) for p in files]
+                       + [GIN_CONFIGS_DIR])
   try:
-    gin.parse_config_files_and_bindings(list(gin_configs), list(gin_bindings),
-                                        skip_unknown=False)
+    gin.parse_config_files_and_bindings(files, list(gin_bindings), skip_unknown=False)
     return Config()
   except (ValueError, KeyError, SyntaxError, TypeError, AttributeError, IOError) as e:
     if isinstance(e, ConfigError):

@@ -32,13 +32,15 @@ def evaluate_test_views(config, scene, params, out_dir, show_progress=True):
 
   Args:
     config: Config. scene: Scene. params: field parameters.
-    out_dir: folder for test_XXX.png, depth_XXX.png, metrics.json, metrics.md.
+    out_dir: folder for test_XXX.png, depth_XXX.png, metrics.json, metrics.md (None:
+      nothing is written).
     show_progress: progress bar over rays.
 
   Returns:
     dict {'per_image': [...], 'mean': {...}}.
   """
-  os.makedirs(out_dir, exist_ok=True)
+  if out_dir is not None:
+    os.makedirs(out_dir, exist_ok=True)
   rays = camera_rays(scene, scene.test_idx)
   per_image = []
   for j, i in enumerate(scene.test_idx):
@@ -49,12 +51,16 @@ def evaluate_test_views(config, scene, params, out_dir, show_progress=True):
     m = metrics.image_metrics(pred, scene.images[i], config.lpips_nets)
     m['name'] = f'test_{int(i):03d}'
     per_image.append(m)
+    if out_dir is None:
+      continue
     report.save_image_png(os.path.join(out_dir, f'test_{int(i):03d}.png'), pred)
     report.save_image_png(os.path.join(out_dir, f'depth_{int(i):03d}.png'),
                           report.colorize(out['distance']))
   rows = report.per_image_table(per_image)
   mean = {k: v for k, v in rows[-1].items() if k != 'name'}
   result = {'per_image': per_image, 'mean': mean}
+  if out_dir is None:
+    return result
   report.write_json(os.path.join(out_dir, 'metrics.json'), result)
   report.write_markdown(os.path.join(out_dir, 'metrics.md'), report.markdown_table(
       rows, ['name', 'psnr', 'ssim'] + [f'lpips_{n}' for n in config.lpips_nets] +

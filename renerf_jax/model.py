@@ -7,6 +7,9 @@ import jax.numpy as jnp
 from renerf_jax import mip
 from renerf_jax.fields import make_field
 
+# Per-level sample offsets: (level, means [B, S, 3]) -> offsets [B, S, 3].
+OffsetFn = Callable[[int, jnp.ndarray], jnp.ndarray]
+
 
 @jax.custom_jvp
 def trunc_exp(x):
@@ -62,7 +65,7 @@ def materialize(tree):
 
 def render_rays(config, params, rays, key, train: bool,
                 feature_mask: Optional[jnp.ndarray] = None,
-                warp: Optional[Callable[[jnp.ndarray], jnp.ndarray]] = None) -> List[dict]:
+                offsets: Optional[OffsetFn] = None) -> List[dict]:
   """Renders rays with num_levels levels (coarse, then resampled fine) sharing one field.
 
   Args:
@@ -72,8 +75,10 @@ def render_rays(config, params, rays, key, train: bool,
     key: PRNG key (stratified jitter, density noise); unused at eval.
     train: training mode (randomised sampling if config.randomized, density noise).
     feature_mask: optional IPE feature mask (FreeNeRF frequency regularisation).
-    warp: optional function adding offsets to sample means [B, S, 3] before the field
-      (the Bayes' Rays deformation field); None costs nothing.
+    offsets: optional per-level hook (level, means [B, S, 3]) -> offsets [B, S, 3],
+      added to that level's sample means before the field (means + offsets(level,
+      means): the Bayes' Rays deformation field, deformation.make_warp, or per-sample
+      offsets per level); None costs nothing.
 
   Returns:
     One dict per level: rgb [B, 3], distance [B], acc [B], weights [B, S], t_vals [B, S+1],
@@ -93,8 +98,8 @@ def render_rays(config, params, rays, key, train: bool,
       t_vals, (means, covs) = mip.resample_along_rays(
           k_sample, rays.origins, rays.directions, rays.radii, t_vals, weights, randomized,
           config.ray_shape, config.stop_level_grad, config.resample_padding)
-    if warp is not None:
-      means = warp(means)
+    if offsets is not None:
+      means = means + offsets(level, means)
     means, covs = materialize((means, covs))
     raw_rgb, raw_density = field.apply(params, means, covs, rays.viewdirs, feature_mask)
     if train and config.density_noise > 0:

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from renerf_jax import poses as pose_lib
-from renerf_jax import memo, report
+from renerf_jax import random_poses, report
 from renerf_jax.datasets import camera_rays
 from renerf_jax.errors import ConfigError
 from renerf_jax.progress import progress_bar
@@ -86,40 +86,31 @@ def random_target_poses(config, scene):
   rng = np.random.default_rng([config.seed, 7919])
   train = np.asarray(scene.poses[scene.train_idx], np.float64)
   if scene.forward_facing:
-    return pose_lib.random_poses_forward_facing(train, config.pseudo_n_random, rng,
-                                                focus_depth=scene.focus_depth,
-                                                spread=config.random_pose_spread)
-  return pose_lib.random_poses_sphere(train, config.pseudo_n_random, rng)
+    return random_poses.random_poses_forward_facing(train, config.pseudo_n_random, rng,
+                                                    focus_depth=scene.focus_depth,
+                                                    spread=config.random_pose_spread)
+  return random_poses.random_poses_sphere(train, config.pseudo_n_random, rng)
 
 
-# Config fields that cannot change a rendered pseudo-view's pixels (which views a round
-# renders, how D is trained, the masks; render_pseudo_views is the unmasked path): the
-# variants of one baseline in a table share their views through _VIEW_CACHE.
-RENDER_IRRELEVANT_FIELDS = ('interp_factors', 'sequencing', 'pseudo_targets',
-                            'pseudo_n_random', 'num_rounds', 'pseudo_frac', 'pseudo_until',
-                            'pseudo_schedule', 'renerf_init', 'use_masks', 'deform_log2_res',
-                            'hessian_rays', 'hessian_lambda', 'hessian_chunk',
-                            'mask_keep_frac', 'mask_threshold', 'seed', 'checkpoint_every',
-                            'eval_every', 'print_every')
-VIEW_CACHE_BYTES = 1 << 30  # About 2000 views at 252x189, 470 at 504x378.
-_VIEW_CACHE = memo.LruCache(max_bytes=VIEW_CACHE_BYTES)  # key -> (image, seconds)
-
-
-def render_pseudo_views(config, scene, params, poses, show_progress=True):
+def render_pseudo_views(config, scene, params, poses, show_progress=True, view_cache=None):
   """Renders model `params` at `poses`; all pixels valid (masks of ones).
 
   Each view's rays are made and rendered on their own (they start a chunk), so a view's
-  pixels do not depend on which other views a round renders, and a view this process
-  has already rendered with the same params, rays and render settings is taken from
-  _VIEW_CACHE: the view-selection presets overlap (7x holds 5x, 3x_b and 3x_c; 11x
-  holds 7x).
+  pixels do not depend on which other views a round renders.
+
+  Args:
+    config: Config. scene: Scene (camera). params: model B. poses: [M, 3, 4].
+    show_progress: draw a progress bar over rays.
+    view_cache: optional cache of rendered views, an object with
+      lookup(config, params, rays) -> (image, seconds it took) or None, and
+      store(config, params, rays, image, seconds); experiments/sharing.py keeps one for
+      the variants of a table whose view sets overlap (7x holds 5x, 3x_b and 3x_c).
 
   Returns:
     (PseudoViews, info: {'rendered_views', 'cached_views', 'cached_seconds': the render
     seconds the cached views took when they were rendered}).
   """
   m, h, w = len(poses), scene.height, scene.width
-  base = memo.digest(memo.config_key(config, RENDER_IRRELEVANT_FIELDS), params)
   images = np.zeros((m, h, w, 3), np.float32)
   todo, cached_seconds = [], 0.
   for i in range(m):
@@ -127,20 +118,20 @@ def render_pseudo_views(config, scene, params, poses, show_progress=True):
     rays = camera_rays(scene, None, poses[i:i + 1])
     view = jax.tree_util.tree_map(lambda v: np.asarray(v).reshape((h * w,) + v.shape[3:]),
                                   rays)
-    key = memo.digest(base, view)
-    hit = _VIEW_CACHE.get(key)
+    hit = None if view_cache is None else view_cache.lookup(config, params, view)
     if hit is None:
-      todo.append((i, key, view))
+      todo.append((i, view))
     else:
       images[i] = hit[0]
       cached_seconds += hit[1]
   bar = progress_bar(total=len(todo) * h * w, unit='ray', disable=not show_progress,
                      desc=f'pseudo-views ({len(todo)} of {m}, {m - len(todo)} cached)')
-  for i, key, view in todo:
+  for i, view in todo:
     t0 = time.perf_counter()
     out = render_flat(config, params, view)
     images[i] = np.clip(out['rgb'], 0., 1.).reshape(h, w, 3)
-    _VIEW_CACHE.put(key, (images[i].copy(), time.perf_counter() - t0))
+    if view_cache is not None:
+      view_cache.store(config, params, view, images[i].copy(), time.perf_counter() - t0)
     bar.update(h * w)
   bar.close()
   pv = PseudoViews(images=images, poses=np.asarray(poses),

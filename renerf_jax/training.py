@@ -254,7 +254,8 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
 
   Args:
     config: Config. scene: Scene (for its camera).
-    out_dir: directory of checkpoints and log.jsonl (resumed when checkpoints exist).
+    out_dir: directory of checkpoints and log.jsonl (resumed when checkpoints exist);
+      None trains in memory (no checkpoints, no log).
     pools: {'real', optionally 'pseudo', 'random_poses'} (see train_step).
     window: (start, end): pseudo-view rays are sampled for start <= step < end only.
     init_params: start from these parameters instead of a fresh initialisation.
@@ -276,27 +277,29 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
     n_pseudo_on -= n_pseudo_on % n_dev
   base_key = jax.random.PRNGKey(config.seed)
   k_init, base_key = jax.random.split(base_key)
-  ckpt_dir = os.path.join(out_dir, 'checkpoints')
-  log_path = os.path.join(out_dir, 'log.jsonl')
   template = {'state': init_state(config, k_init, init_params), 'meta': _meta_template()}
-  restored = rundir.restore_checkpoint(ckpt_dir, template)
-  if restored is None:
-    state, train_seconds = template['state'], 0.
-    if os.path.exists(log_path):
-      os.remove(log_path)
-  else:
-    state, train_seconds = restored['state'], float(restored['meta']['train_seconds'])
-    rundir.truncate_jsonl(log_path, int(state.step))
+  state, train_seconds, curve = template['state'], 0., []
+  if out_dir is not None:
+    ckpt_dir = os.path.join(out_dir, 'checkpoints')
+    log_path = os.path.join(out_dir, 'log.jsonl')
+    restored = rundir.restore_checkpoint(ckpt_dir, template)
+    if restored is None:
+      if os.path.exists(log_path):
+        os.remove(log_path)
+    else:
+      state, train_seconds = restored['state'], float(restored['meta']['train_seconds'])
+      rundir.truncate_jsonl(log_path, int(state.step))
+    curve = [r for r in rundir.read_jsonl(log_path) if 'eval_psnr' in r]
   state = jax.device_put(state, replicated_sharding())
   start = int(state.step)
-  curve = [r for r in rundir.read_jsonl(log_path) if 'eval_psnr' in r]
   bar = progress_bar(total=config.max_steps, initial=start, desc=desc,
                      disable=not show_progress)
   t_last = time.perf_counter()
 
   def save(state, secs):
-    rundir.save_checkpoint(ckpt_dir, {'state': state, 'meta': {
-        'train_seconds': np.asarray(secs, np.float64)}}, int(state.step))
+    if out_dir is not None:
+      rundir.save_checkpoint(ckpt_dir, {'state': state, 'meta': {
+          'train_seconds': np.asarray(secs, np.float64)}}, int(state.step))
 
   for step in range(start, config.max_steps):
     n_pseudo = n_pseudo_on if window[0] <= step < window[1] else 0
@@ -324,7 +327,8 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
         curve.append(rec)
       bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}",
                       **({'test': f"{rec['eval_psnr']:.2f}"} if eval_now else {}))
-      rundir.append_jsonl(log_path, rec)
+      if out_dir is not None:
+        rundir.append_jsonl(log_path, rec)
       if ckpt_now:
         save(state, train_seconds)
       t_last = time.perf_counter()

@@ -1,18 +1,35 @@
+import dataclasses
 import glob
 import os
+import re
+import subprocess
+import sys
 
 import pytest
 
-from renerf_jax.configs import Config, load_config
+from renerf_jax.configs import Config, default_run_dir, load_config
 from renerf_jax.errors import ConfigError
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+GIN = os.path.join(REPO, 'gin_configs')
+TABLES = os.path.join(REPO, 'experiments', 'configs')
+TOP_LEVEL = sorted(glob.glob(os.path.join(GIN, '*.gin')) + glob.glob(os.path.join(TABLES, '*.gin')))
+MODIFIERS = sorted(glob.glob(os.path.join(GIN, 'modifiers', '*.gin')))
 
 
-@pytest.mark.parametrize('path', sorted(glob.glob(os.path.join(REPO, 'gin_configs', '*.gin'))))
+def _gin(*names):
+  return load_config([n if os.path.isabs(n) else os.path.join(GIN, n) for n in names])
+
+
+@pytest.mark.parametrize('path', TOP_LEVEL)
 def test_every_gin_config_parses(path):
   config = load_config([path])
   assert isinstance(config, Config)
+
+
+@pytest.mark.parametrize('path', MODIFIERS)
+def test_every_modifier_stacks_on_llff3(path):
+  assert isinstance(load_config([os.path.join(GIN, 'llff3.gin'), path]), Config)
 
 
 def test_llff3_has_regnerf_values():
@@ -28,6 +45,71 @@ def test_llff3_has_regnerf_values():
   assert (c.anneal_nearfar_steps, c.anneal_nearfar_perc, c.anneal_mid_perc) == (512, 1e-4, 1.)
   assert (c.n_random_poses, c.batch_size_random, c.patch_size) == (10000, 4096, 8)
   assert not c.freq_reg and c.occ_reg_mult == 0.
+
+
+def _bindings(path):
+  """{field: value text} of a gin file's own `Config.x = ...` lines (not its includes)."""
+  with open(path) as f:
+    return dict(re.findall(r'^Config\.(\w+)\s*=\s*(.+?)\s*$', f.read(), re.M))
+
+
+def test_defaults_have_one_source():
+  """The RegNeRF llff3 values live in Config only: llff3.gin and renerf.gin bind nothing
+  that equals a default (a restated default would be a second source of truth)."""
+  for name in ('llff3.gin', 'renerf.gin'):
+    only = _gin(name)
+    for field in _bindings(os.path.join(GIN, name)):
+      assert getattr(only, field) != getattr(Config(), field), (name, field)
+  assert set(_bindings(os.path.join(GIN, 'llff3.gin'))) == {
+      'data_dir', 'eval_every', 'checkpoint_every'}
+  assert _gin('llff3.gin') == dataclasses.replace(
+      Config(), data_dir='../shared/data/nerf_llff_data', eval_every=5000,
+      checkpoint_every=2500)
+
+
+def test_config_comments_carry_no_measurements():
+  """Measured results live in experiments/results/README.md, not in gin comments."""
+  for path in TOP_LEVEL + MODIFIERS:
+    with open(path) as f:
+      text = f.read()
+    assert not re.search(r'\d dB|\d+(\.\d+)? / 0\.\d', text), path
+
+
+def test_bare_config_names_resolve_through_gin_configs(tmp_path, monkeypatch):
+  """`--gin_configs=llff3.gin` (or `llff3`) works from any directory."""
+  expected = load_config([os.path.join(GIN, 'llff3.gin')])
+  monkeypatch.chdir(tmp_path)
+  assert load_config(['llff3.gin']) == expected
+  assert load_config(['llff3']) == expected
+  assert load_config(['llff3_fast.gin', 'renerf.gin']) == _gin('llff3_fast.gin', 'renerf.gin')
+  assert load_config(['llff3', 'modifiers/mipnerf']) == _gin('llff3.gin',
+                                                             'modifiers/mipnerf.gin')
+  # A file of that name in the working directory wins over gin_configs/.
+  (tmp_path / 'llff3.gin').write_text('Config.max_steps = 7\n')
+  assert load_config(['llff3.gin']).max_steps == 7
+  # A config outside gin_configs/ can include gin_configs/ files by name.
+  (tmp_path / 'mine.gin').write_text("include 'llff3_cpu.gin'\nConfig.seed = 3\n")
+  assert load_config([str(tmp_path / 'mine.gin')]) == dataclasses.replace(
+      _gin('llff3_cpu.gin'), seed=3)
+  assert default_run_dir(['llff3']) == default_run_dir(['llff3.gin']) == os.path.join(
+      'runs', 'llff3')
+
+
+def test_unknown_bare_config_name_is_one_clear_error(tmp_path, monkeypatch):
+  monkeypatch.chdir(tmp_path)
+  with pytest.raises(ConfigError, match='no_such_config') as e:
+    load_config(['no_such_config'])
+  assert len(str(e.value).splitlines()) == 1 and 'gin_configs' in str(e.value)
+
+
+def test_train_py_finds_a_bare_config_name():
+  """The issue's `python train.py --gin_configs=llff3.gin` from the repository root gets
+  past config parsing (stopped by a bad binding before anything is loaded or written)."""
+  res = subprocess.run([sys.executable, 'train.py', '--gin_configs=llff3.gin',
+                        '--gin_bindings=Config.max_steps = 0'], cwd=REPO,
+                       capture_output=True, text=True, timeout=300, check=False)
+  assert res.returncode == 2, res.stderr[-2000:]
+  assert 'Config.max_steps=0 must be > 0' in res.stderr and 'not found' not in res.stderr
 
 
 def test_small_configs_change_sizes_not_code_paths():
@@ -58,7 +140,7 @@ def test_bad_value_names_the_field():
 
 
 def test_bindings_do_not_leak_and_config_gin_round_trips(tmp_path):
-  from renerf_jax.configs import config_to_gin
+  from renerf_jax.configs import config_to_gin  # pylint: disable=g-import-not-at-top
   c = load_config([os.path.join(REPO, 'gin_configs', 'demo.gin')], ['Config.max_steps = 7'])
   assert Config().max_steps == 69768  # nothing of the parse leaks into later Configs
   path = tmp_path / 'config.gin'
@@ -66,28 +148,72 @@ def test_bindings_do_not_leak_and_config_gin_round_trips(tmp_path):
   assert load_config([str(path)]) == c
 
 
-def test_renerf_configs_are_their_base_plus_three_rounds():
-  import dataclasses
-  for name, base_name, k in (('llff3_renerf.gin', 'llff3.gin', 5000),
-                             ('llff3_cpu_renerf.gin', 'llff3_cpu.gin', 1000),
-                             ('llff3_fast_renerf.gin', 'llff3_fast.gin', 400)):
-    c = load_config([os.path.join(REPO, 'gin_configs', name)])
-    base = load_config([os.path.join(REPO, 'gin_configs', base_name)])
-    assert (c.num_rounds, c.interp_factors, c.pseudo_until) == (3, '7x', k)
-    assert (c.renerf_init, c.pseudo_schedule) == ('reset', 'early')
-    # K comes after the near/far annealing (when on), the depth-TV decay and the warm-up.
-    assert k > max(c.anneal_nearfar_steps * c.anneal_nearfar, c.depth_tv_maxstep,
-                   c.lr_delay_steps)
-    assert dataclasses.replace(c, num_rounds=0) == dataclasses.replace(base, num_rounds=0)
+# The configs before the restructuring (commit 6bace58) and the files that give the same
+# Config now, with the fields that tell them apart (their values as the old files gave).
+OLD_TO_NEW = {
+    'llff3_renerf.gin': (('llff3.gin', 'renerf.gin'),
+                         dict(field='mlp', max_steps=69768, num_rounds=3, pseudo_until=5000)),
+    'llff3_cpu_renerf.gin': (('llff3_cpu.gin', 'renerf.gin'),
+                             dict(field='mlp', max_steps=2000, num_rounds=3, pseudo_until=1000)),
+    'llff3_fast_renerf.gin': (('llff3_fast.gin', 'renerf.gin'),
+                              dict(field='grid', max_steps=800, num_rounds=3, pseudo_until=400,
+                                   anneal_nearfar=False)),
+    'llff3_small_renerf.gin': ((os.path.join(TABLES, 'table_small.gin'),),
+                               dict(field='grid', max_steps=400, batch_size=1024,
+                                    image_downsample=2, anneal_nearfar=True, num_rounds=3,
+                                    pseudo_until=200, hessian_rays=16384, eval_stride=4,
+                                    lpips_nets=('alex',))),
+    'llff3_tiny_renerf.gin': ((os.path.join(TABLES, 'table_tiny.gin'),),
+                              dict(field='grid', max_steps=400, batch_size=512,
+                                   image_downsample=4, anneal_nearfar=True, num_rounds=3,
+                                   pseudo_until=200, hessian_rays=8192, eval_stride=2,
+                                   lpips_nets=('alex',))),
+}
+# What every old *_renerf.gin set: the method's settings (Config's defaults) and 3 rounds.
+RENERF = dict(num_rounds=3, interp_factors='7x', sequencing='position', pseudo_frac=0.5,
+              pseudo_schedule='early', renerf_init='reset')
+
+
+@pytest.mark.parametrize('old', sorted(OLD_TO_NEW))
+def test_old_configs_map_to_new_files(old):
+  new, expected = OLD_TO_NEW[old]
+  c = _gin(*new)
+  assert {k: getattr(c, k) for k in expected} == expected, (old, new)
+  assert {k: getattr(c, k) for k in RENERF} == RENERF
+  assert c.data_dir == '../shared/data/nerf_llff_data'
+
+
+@pytest.mark.parametrize('base', ['llff3.gin', 'llff3_cpu.gin', 'llff3_fast.gin',
+                                  'llff3_freenerf.gin', 'demo.gin'] + [
+                                      ('llff3.gin', m) for m in MODIFIERS])
+def test_renerf_gin_on_any_base_adds_only_the_rounds(base):
+  """renerf.gin stacked after a base changes num_rounds to 3 and nothing else; K
+  (pseudo_until) and the method's settings are the base's (Config's defaults)."""
+  base = base if isinstance(base, tuple) else (base,)
+  c, b = _gin(*base, 'renerf.gin'), _gin(*base)
+  assert c.num_rounds == 3
+  assert dataclasses.replace(c, num_rounds=b.num_rounds) == b
+  # K comes after the near/far annealing (when on), the depth-TV decay and the warm-up.
+  assert c.pseudo_until > max(c.anneal_nearfar_steps * c.anneal_nearfar, c.depth_tv_maxstep,
+                              c.lr_delay_steps)
+
+
+def test_table_configs_include_a_base_and_renerf_only():
+  """No include chains: each table config includes a gin_configs/ base and renerf.gin and
+  states its own differences."""
+  for path in glob.glob(os.path.join(TABLES, '*.gin')):
+    with open(path) as f:
+      includes = re.findall(r"^include '(.+)'", f.read(), re.M)
+    assert includes == ['llff3_fast.gin', 'renerf.gin'], path
+    assert all(os.path.isfile(os.path.join(GIN, i)) for i in includes)
 
 
 def test_small_table_config_is_the_fast_one_smaller():
-  """llff3_small_renerf.gin: the fast Re-Nerfing config at half resolution, with every
+  """table_small.gin: the fast Re-Nerfing config at half resolution, with every
   schedule in steps scaled with max_steps (K at half the steps, as in the fast one) and
   RegNeRF's near/far annealing on."""
-  import dataclasses
-  small = load_config([os.path.join(REPO, 'gin_configs', 'llff3_small_renerf.gin')])
-  fast = load_config([os.path.join(REPO, 'gin_configs', 'llff3_fast_renerf.gin')])
+  small = load_config([os.path.join(TABLES, 'table_small.gin')])
+  fast = _gin('llff3_fast.gin', 'renerf.gin')
   assert small.image_downsample == 2 and fast.image_downsample == 1
   assert small.max_steps < fast.max_steps and small.batch_size < fast.batch_size
   for c in (small, fast):
@@ -103,13 +229,12 @@ def test_small_table_config_is_the_fast_one_smaller():
 
 
 def test_tiny_table_config_is_the_small_one_at_quarter_resolution():
-  """llff3_tiny_renerf.gin (the hour-budget tables): the small table config at a quarter of
+  """table_tiny.gin (the hour-budget tables): the small table config at a quarter of
   the resolution with half the rays per step and half the Hessian rays; the schedule, the
   regularisers and the Re-Nerfing settings are the small config's, and the cheap eval
   sees as many pixels per test view."""
-  import dataclasses
-  tiny = load_config([os.path.join(REPO, 'gin_configs', 'llff3_tiny_renerf.gin')])
-  small = load_config([os.path.join(REPO, 'gin_configs', 'llff3_small_renerf.gin')])
+  tiny = load_config([os.path.join(TABLES, 'table_tiny.gin')])
+  small = load_config([os.path.join(TABLES, 'table_small.gin')])
   assert (tiny.image_downsample, small.image_downsample) == (4, 2)
   assert tiny.batch_size * 2 == small.batch_size
   assert tiny.hessian_rays * 2 == small.hessian_rays

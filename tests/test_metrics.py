@@ -111,12 +111,22 @@ def test_lpips_rejects_unknown_net():
     metrics.LPIPS('squeeze-me')
 
 
-def test_avg_err_hand_computed():
-  # psnr 20 -> mse 0.01; ssim 0.96 -> sqrt(0.04) = 0.2; lpips 0.5.
-  expected = (0.01 * 0.2 * 0.5)**(1. / 3.)  # = 0.1
-  np.testing.assert_allclose(metrics.avg_err(20., 0.96, 0.5), expected,
-                             rtol=1e-9)
-  np.testing.assert_allclose(expected, 0.1, rtol=1e-9)
+def test_avg_err_known_values():
+  # RegNeRF's average error is the geometric mean of MSE = 10^(-PSNR/10),
+  # sqrt(1 - SSIM) and LPIPS; values worked out by hand:
+  # psnr 20 -> mse 0.01, ssim 0.96 -> 0.2, lpips 0.5: cbrt(0.001) = 0.1.
+  np.testing.assert_allclose(metrics.avg_err(20., 0.96, 0.5), 0.1, rtol=1e-9)
+  # psnr 50 -> mse 1e-5: cbrt(1e-6) = 0.01; lpips 4: cbrt(0.008) = 0.2;
+  # psnr 0 -> mse 1, ssim 0.75 -> 0.5, lpips 0.016: cbrt(0.008) = 0.2.
+  np.testing.assert_allclose(metrics.avg_err(50., 0.96, 0.5), 0.01, rtol=1e-9)
+  np.testing.assert_allclose(metrics.avg_err(20., 0.96, 4.), 0.2, rtol=1e-9)
+  np.testing.assert_allclose(metrics.avg_err(0., 0.75, 0.016), 0.2, rtol=1e-9)
+  # Elementwise over arrays (broadcast against scalars).
+  np.testing.assert_allclose(metrics.avg_err([20., 50.], 0.96, [4., 0.5]),
+                             [0.2, 0.01], rtol=1e-9)
+  # A perfect SSIM or LPIPS gives zero error; better PSNR gives lower error.
+  assert metrics.avg_err(20., 1., 0.5) == 0.
+  assert metrics.avg_err(20., 0.96, 0.) == 0.
   assert metrics.avg_err(30., 0.96, 0.5) < metrics.avg_err(20., 0.96, 0.5)
 
 

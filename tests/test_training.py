@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from renerf_jax import training
+from renerf_jax import rundir, training
 from renerf_jax.datasets import load_scene, ray_pool
 from conftest import REPO, tiny_config
 
@@ -83,22 +83,31 @@ def test_same_seed_same_parameters():
                          jax.tree_util.tree_leaves(c.params)[0])
 
 
-def test_train_model_resumes_from_checkpoint(tmp_path):
+def test_train_model_resumes_from_a_mid_run_checkpoint(tmp_path, monkeypatch):
   config, scene, pools = _setup(max_steps=20, checkpoint_every=10, eval_every=0)
   full = training.train_model(config, scene, str(tmp_path / 'a'), pools, show_progress=False)
-  # Interrupted after 10 steps (checkpoint at 10), then resumed to 20.
-  half = tiny_config(depth_tv_loss_mult=0., anneal_nearfar=False, max_steps=20,
-                     checkpoint_every=10, eval_every=0)
-  import dataclasses
-  short = dataclasses.replace(half, max_steps=10)
-  training.train_model(short, scene, str(tmp_path / 'b'), pools, show_progress=False)
-  # The lr schedule depends on max_steps, so resume with the full config from step 10:
-  # compare against the uninterrupted run's step-10 checkpoint path instead.
-  resumed = training.train_model(half, scene, str(tmp_path / 'a'), pools,
+  # The same run interrupted at step 13 (after its step-10 checkpoint) ...
+  real_step, calls = training.train_step, []
+
+  def step(*args, **kwargs):
+    calls.append(int(args[3].step))
+    if len(calls) == 14:
+      raise KeyboardInterrupt('killed at step 13')
+    return real_step(*args, **kwargs)
+  monkeypatch.setattr(training, 'train_step', step)
+  with pytest.raises(KeyboardInterrupt):
+    training.train_model(config, scene, str(tmp_path / 'b'), pools, show_progress=False)
+  assert [s for s, _ in rundir.list_checkpoints(str(tmp_path / 'b' / 'checkpoints'))] == [10]
+  # ... and run again: it restores step 10, trains steps 10..19 once more, and ends where
+  # the uninterrupted run ended, bit for bit.
+  calls.clear()
+  resumed = training.train_model(config, scene, str(tmp_path / 'b'), pools,
                                  show_progress=False)
-  assert int(resumed.state.step) == 20  # nothing left to do: restored, not retrained
+  assert calls == list(range(10, 20)) and int(resumed.state.step) == 20
   jax.tree_util.tree_map(np.testing.assert_array_equal, full.state.params,
                          resumed.state.params)
+  jax.tree_util.tree_map(np.testing.assert_array_equal, full.state.opt_state,
+                         resumed.state.opt_state)
 
 
 _SHARD_SCRIPT = r'''
@@ -107,7 +116,7 @@ import sys
 sys.path.insert(0, {repo!r})
 sys.path.insert(0, {tests!r})
 from conftest import tiny_config
-from renerf_jax import training
+from renerf_jax import rundir, training
 from renerf_jax.datasets import load_scene, ray_pool
 config = tiny_config(depth_tv_loss_mult=0., anneal_nearfar=False, density_noise=0.)
 scene = load_scene(config)

@@ -1,0 +1,172 @@
+"""Is the baseline B converged? Test metrics of B trained for several step counts.
+
+A converged B is one that 2x more steps no longer improves (issue 18: B trained 2x longer
+gains at most 0.1 dB PSNR and 0.005 SSIM, mean over seeds). The lr schedule depends on
+max_steps (log-linear decay over the whole run), so "B at N steps" is a run of its own
+for every N, not an iterate of a longer run. For every scene, seed and N in --steps it
+trains the baseline (round 0 of a run directory <out>/<name>/<scene>/N<N>/seed<k>,
+resumable, reused when finished) and reports, per scene and N, the mean +- std over seeds
+of PSNR / SSIM / LPIPS and the paired gain of 2N over N (same seed).
+
+Invocations can be split by scene or seed; each writes the table of every finished run
+it finds. The converged-regime config on 2 CPU cores (experiments/configs/
+table_converged.gin), fern and orchids, seed 0 first:
+
+  python experiments/convergence.py --name converged_curves \
+    --config experiments/configs/table_converged.gin --scenes fern orchids \
+    --seeds 0 --steps 500 1000 2000 4000
+
+Writes <out>/<name>.json, <name>.md and <name>.png (metrics against steps and against
+training seconds, one column per scene, mean +- std over seeds).
+"""
+import argparse
+import os
+import shlex
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from renerf_jax import cli, jit_cache, report, resume, rundir  # pylint: disable=g-import-not-at-top
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import load_scene
+from renerf_jax.progress import progress_bar
+
+METRICS = ('psnr', 'ssim', 'lpips_alex')
+# Issue 18's convergence criterion: what B trained 2x longer may still gain.
+MAX_GAIN = {'psnr': 0.1, 'ssim': 0.005}
+
+
+def parser():
+  p = argparse.ArgumentParser(description=__doc__,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+  p.add_argument('--name', required=True)
+  p.add_argument('--config', nargs='+', required=True, help='gin config file(s)')
+  p.add_argument('--data_dir', default='../shared/data/nerf_llff_data')
+  p.add_argument('--scenes', nargs='+', default=['fern'])
+  p.add_argument('--seeds', type=int, nargs='+', default=[0])
+  p.add_argument('--steps', type=int, nargs='+', required=True, help='max_steps values')
+  p.add_argument('--gin_bindings', action='append', default=[])
+  p.add_argument('--out', default='experiments/results')
+  p.add_argument('--train', action=argparse.BooleanOptionalAction, default=True,
+                 help='train missing runs (--no-train: only tabulate finished ones)')
+  return p
+
+
+def run_dir_of(root, scene, steps, seed):
+  return os.path.join(root, scene, f'N{steps}', f'seed{seed}')
+
+
+def finished(root, scene, steps, seed):
+  """Metrics and curve of a finished baseline, or None."""
+  rdir = resume.round_dir(run_dir_of(root, scene, steps, seed), 0)
+  if not rundir.is_done(rdir):
+    return None
+  return report.read_json(os.path.join(rdir, 'result.json'))
+
+
+def mean_std(vals):
+  vals = np.asarray(vals, np.float64)
+  return float(vals.mean()), float(vals.std(ddof=1)) if len(vals) > 1 else 0.
+
+
+def summarize(root, scenes, seeds, steps):
+  """Rows per (scene, N): mean +- std and the paired gain of the next N (= 2N if given)."""
+  rows = []
+  for scene in scenes:
+    for i, n in enumerate(steps):
+      res = {s: finished(root, scene, n, s) for s in seeds}
+      res = {s: r for s, r in res.items() if r is not None}
+      if not res:
+        continue
+      row = {'scene': scene, 'steps': n, 'seeds': len(res)}
+      for k in METRICS + ('round_seconds',):
+        row[k], row[k + '_std'] = mean_std([r['metrics'][k] for r in res.values()])
+      nxt = steps[i + 1] if i + 1 < len(steps) else None
+      if nxt == 2 * n:
+        more = {s: finished(root, scene, nxt, s) for s in res}
+        paired = [s for s, r in more.items() if r is not None]
+        if paired:
+          row['paired_2x'] = len(paired)
+          for k in METRICS:
+            row[f'gain_2x_{k}'], row[f'gain_2x_{k}_std'] = mean_std(
+                [more[s]['metrics'][k] - res[s]['metrics'][k] for s in paired])
+          row['converged'] = bool(all(row[f'gain_2x_{k}'] <= v for k, v in MAX_GAIN.items()))
+      rows.append(row)
+  return rows
+
+
+def markdown(rows, command):
+  fmt = lambda r, k, d=3: (f"{r[k]:.{d}f} +- {r[k + '_std']:.{d}f}" if k in r else '')
+  lines = ['| scene | steps | seeds | PSNR | SSIM | LPIPS-alex | train s | 2x gain PSNR '
+           '| 2x gain SSIM | 2x gain LPIPS | converged |',
+           '|---|---|---|---|---|---|---|---|---|---|---|']
+  for r in rows:
+    lines.append(
+        f"| {r['scene']} | {r['steps']} | {r['seeds']} | {fmt(r, 'psnr', 2)} | "
+        f"{fmt(r, 'ssim')} | {fmt(r, 'lpips_alex')} | {r['round_seconds']:.0f} | "
+        f"{fmt(r, 'gain_2x_psnr', 2)} | {fmt(r, 'gain_2x_ssim')} | "
+        f"{fmt(r, 'gain_2x_lpips_alex')} | "
+        f"{'' if 'converged' in r and False else ('yes' if r.get('converged') else ('no' if 'converged' in r else ''))} |")
+  return ('\n'.join(lines) + '\n\n"2x gain": metric at 2N steps minus at N, paired by seed '
+          f'(mean +- std). Converged: PSNR gain <= {MAX_GAIN["psnr"]} dB and SSIM gain <= '
+          f'{MAX_GAIN["ssim"]}.\n\nCommand:\n\n    {command}\n')
+
+
+def plot(rows, scenes, path):
+  import matplotlib  # pylint: disable=g-import-not-at-top
+  matplotlib.use('Agg')
+  import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
+  fig, axes = plt.subplots(len(METRICS), 2, figsize=(10, 2.6 * len(METRICS)), squeeze=False)
+  for scene in scenes:
+    rs = [r for r in rows if r['scene'] == scene]
+    if not rs:
+      continue
+    for i, k in enumerate(METRICS):
+      for j, x in enumerate(('steps', 'round_seconds')):
+        axes[i, j].errorbar([r[x] for r in rs], [r[k] for r in rs],
+                            yerr=[r[k + '_std'] for r in rs], marker='o', capsize=3,
+                            label=scene)
+        axes[i, j].set_xscale('log')
+        axes[i, j].set_xlabel('max_steps' if x == 'steps' else 'training seconds')
+        axes[i, j].set_ylabel(k)
+  axes[0, 0].legend()
+  fig.suptitle('baseline B at N steps (decayed lr): test metrics, mean +- std over seeds')
+  fig.tight_layout()
+  fig.savefig(path, dpi=100)
+  plt.close(fig)
+
+
+def main(argv=None):
+  args = parser().parse_args(argv)
+  jit_cache.enable_compilation_cache()
+  steps = sorted(set(args.steps))
+  root = os.path.join(args.out, args.name)
+  jobs = [(sc, n, s) for sc in args.scenes for s in args.seeds for n in steps
+          if finished(root, sc, n, s) is None] if args.train else []
+  bar = progress_bar(total=sum(n for _, n, _ in jobs), unit='step', desc='convergence')
+  for scene_name, n, seed in jobs:
+    bindings = args.gin_bindings + [
+        f"Config.data_dir = {args.data_dir!r}", f"Config.scene = {scene_name!r}",
+        'Config.num_rounds = 0', f'Config.max_steps = {n}', f'Config.seed = {seed}',
+        f'Config.eval_every = {max(n // 10, 1)}', f'Config.checkpoint_every = {max(n // 4, 1)}']
+    config = load_config(args.config, bindings)
+    scene = load_scene(config)
+    run_dir = run_dir_of(root, scene_name, n, seed)
+    cli.check_run_dir(config, run_dir, create=True)
+    resume.run_rounds(config, scene, run_dir, show_progress=False)
+    jit_cache.release_compiled()
+    bar.update(n)
+  bar.close()
+  rows = summarize(root, args.scenes, args.seeds, steps)
+  command = 'python ' + shlex.join(sys.argv)
+  report.write_json(os.path.join(args.out, args.name + '.json'),
+                    {'name': args.name, 'config': args.config, 'bindings': args.gin_bindings,
+                     'rows': rows, 'max_gain': MAX_GAIN, 'command': command})
+  report.write_markdown(os.path.join(args.out, args.name + '.md'), markdown(rows, command))
+  plot(rows, args.scenes, os.path.join(args.out, args.name + '.png'))
+  print(markdown(rows, command))
+
+
+if __name__ == '__main__':
+  main()

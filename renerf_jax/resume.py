@@ -1,0 +1,101 @@
+"""Re-Nerfing rounds in a run directory: the edge of the pure `renerf.round_step`.
+
+  runs/<name>/round_<r>/
+    pseudo_views/   views.npz (+ PNGs), views.json, timing.json   (r >= 1)
+    train/          checkpoints/, log.jsonl                        (resume mid-round)
+    eval/           test renders, metrics.json, metrics.md
+    params.msgpack, result.json, DONE
+
+A round marked DONE is loaded, never rewritten; an interrupted round resumes from what it
+left: its pseudo-views (if saved) and its last atomic checkpoint. Every write is atomic
+(temp file + rename), and temp files of a killed write are removed when the round resumes.
+"""
+import os
+from typing import Callable
+
+import jax
+from flax import serialization
+
+from renerf_jax import renerf, report, rundir, training
+from renerf_jax.evaluation import evaluate_test_views
+from renerf_jax.pseudo_views import load_pseudo_views, save_pseudo_views
+
+
+def round_dir(run_dir, r):
+  return os.path.join(run_dir, f'round_{r}')
+
+
+def stored_synthesis(out_dir, synthesize_fn: Callable = renerf.synthesize) -> Callable:
+  """synthesize_fn with its result kept in out_dir: a resumed round reuses it.
+
+  Returns:
+    A function like renerf.synthesize.
+  """
+  def fn(config, scene, params, show_progress=False):
+    pv = load_pseudo_views(out_dir)
+    info_path = os.path.join(out_dir, 'timing.json')
+    if pv is not None and os.path.isfile(info_path):
+      return pv, report.read_json(info_path), report.read_json(
+          os.path.join(out_dir, 'views.json'))
+    pv, timing, meta = synthesize_fn(config, scene, params, show_progress)
+    save_pseudo_views(out_dir, pv, meta)
+    report.write_json(info_path, timing)  # Last: it marks the pseudo-views as complete.
+    return pv, timing, meta
+  return fn
+
+
+def save_round(rdir, state: renerf.RoundState):
+  """Writes the round's params and result.json, then marks it DONE."""
+  with report.atomic_open(os.path.join(rdir, 'params.msgpack'), 'wb') as f:
+    f.write(serialization.to_bytes(state.params))
+  report.write_json(os.path.join(rdir, 'result.json'), {'metrics': state.metrics[-1],
+                                                        'curve': state.curves[-1]})
+  rundir.mark_done(rdir, {'round': state.round_index})
+
+
+def load_round(config, rdir, state: renerf.RoundState) -> renerf.RoundState:
+  """The RoundState after the finished round in rdir (read-only)."""
+  r = state.round_index + 1
+  template = training.init_state(renerf.round_config(config, r),
+                                 jax.random.PRNGKey(0)).params
+  with open(os.path.join(rdir, 'params.msgpack'), 'rb') as f:
+    params = serialization.from_bytes(template, f.read())
+  result = report.read_json(os.path.join(rdir, 'result.json'))
+  return renerf.RoundState(
+      params=params, pseudo=load_pseudo_views(os.path.join(rdir, 'pseudo_views')),
+      round_index=r, metrics=state.metrics + (result['metrics'],),
+      curves=state.curves + (result['curve'],),
+      seconds=float(result['metrics']['cumulative_seconds']))
+
+
+def run_rounds(config, scene, run_dir, show_progress=True,
+               synthesize_fn: Callable = renerf.synthesize) -> renerf.RoundState:
+  """Baseline plus config.num_rounds rounds in run_dir, resuming what is there.
+
+  Args:
+    config, scene: Config and Scene. run_dir: the run directory.
+    show_progress: draw progress bars.
+    synthesize_fn: the pseudo-view synthesis (experiments share work between table
+      variants through it).
+
+  Returns:
+    RoundState after the last round.
+  """
+  renerf.check_rounds_config(config, scene)
+  state = renerf.initial_state()
+  for r in range(config.num_rounds + 1):
+    rdir = round_dir(run_dir, r)
+    if rundir.is_done(rdir):
+      state = load_round(config, rdir, state)
+      continue
+    rundir.remove_stale_temp_files(rdir)  # Left by a run killed mid-write.
+    train_dir, eval_dir = os.path.join(rdir, 'train'), os.path.join(rdir, 'eval')
+    state = renerf.round_step(
+        config, scene, state, show_progress,
+        synthesize_fn=stored_synthesis(os.path.join(rdir, 'pseudo_views'), synthesize_fn),
+        train_fn=lambda cfg, sc, pools, **kw: training.train_model(cfg, sc, train_dir,
+                                                                   pools, **kw),
+        evaluate_fn=lambda cfg, sc, params: evaluate_test_views(cfg, sc, params, eval_dir,
+                                                                show_progress=False))
+    save_round(rdir, state)
+  return state

@@ -1,0 +1,98 @@
+"""Tests for renerf_jax.laplace (the Laplace / Gauss-Newton Hessian diagonal)."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from dense_reference import reference_hessian_diagonals
+from tiny_scene import LAM, take, tiny_setup
+
+from renerf_jax import laplace, uncertainty
+from renerf_jax.model import render_rays
+
+
+@pytest.fixture(scope='module')
+def setup():
+  return tiny_setup()
+
+
+def test_kahan_keeps_small_terms():
+  def body(_, carry):
+    return laplace.kahan_add(carry[0], carry[1], jnp.float32(1e-8))
+  total, comp = jax.jit(lambda: jax.lax.fori_loop(
+      0, 10000, body, (jnp.float32(1.), jnp.float32(0.))))()
+  naive = jax.jit(lambda: jax.lax.fori_loop(0, 10000, lambda _, s: s + jnp.float32(1e-8),
+                                            jnp.float32(1.)))()
+  assert float(naive) == 1.  # float32 drops every term on its own...
+  np.testing.assert_allclose(float(total - comp), 1.0001, rtol=1e-6)  # ... Kahan does not.
+
+
+HESSIAN_RAYS = [5, 70, 140, 210, 333, 500]  # 6 rays; with chunk 4 one chunk is padded.
+
+
+def test_hessian_diagonal_matches_jax_hessian(setup):
+  config, params, pool = setup
+  rays = take(pool['rays'], HESSIAN_RAYS)
+  h = np.asarray(laplace.hessian_diagonal(config, params, rays, -1., 1., 1, LAM, chunk=4))
+  ref = np.asarray(reference_hessian_diagonals(config, params, rays, -1., 1., 1)['gn'])
+  assert h.shape == (27, 3)
+  assert np.sum(ref > 1e-2 * ref.max()) > 20  # Many vertices seen: a non-trivial check.
+  np.testing.assert_allclose(h, ref + 2. * LAM, rtol=1e-4, atol=1e-6 * ref.max())
+
+
+def test_reference_true_hessian_is_gn_at_zero_residual_only(setup):
+  config, params, pool = setup
+  rays = take(pool['rays'], HESSIAN_RAYS)
+  rgb0 = jnp.stack([lv['rgb'] for lv in jax.jit(
+      lambda r: render_rays(config, params, r, jax.random.PRNGKey(0), False))(rays)])
+  ref = reference_hessian_diagonals(config, params, rays, -1., 1., 1, gt_rgb=rgb0)
+  np.testing.assert_allclose(ref['true'], ref['gn'], rtol=1e-4, atol=1e-6 * ref['gn'].max())
+  off = reference_hessian_diagonals(config, params, rays, -1., 1., 1,
+                                        gt_rgb=rgb0 + 0.3)['true']
+  assert np.max(np.abs(off - ref['gn'])) > 1e-2 * np.max(ref['gn'])
+
+
+def test_unseen_vertices_get_the_prior(setup):
+  config, params, pool = setup
+  rays = take(pool['rays'], np.arange(3, 600, 120))
+  # NDC samples lie on o + t d, t in [0, 1]; the box reaches x, y = 7 with cells of 4,
+  # so the vertices at x = 7 or y = 7 are never a sample's corner.
+  ends = np.concatenate([rays.origins, rays.origins + rays.directions])
+  assert ends[:, :2].max() < 3.
+  lo, hi = np.array([-1., -1., -1.]), np.array([7., 7., 1.])
+  h = np.asarray(laplace.hessian_diagonal(config, params, rays, lo, hi, 1, LAM, chunk=4))
+  ijk = np.stack(np.meshgrid(*[np.arange(3)] * 3, indexing='ij'), -1).reshape(-1, 3)
+  unseen = (ijk[:, 0] == 2) | (ijk[:, 1] == 2)
+  np.testing.assert_allclose(h[unseen], 2. * LAM, rtol=1e-6)
+  np.testing.assert_allclose(1. / h[unseen], 1. / (2. * LAM), rtol=1e-6)  # Sigma per axis.
+  assert np.max(h[~unseen]) > 10. * LAM
+  sigma = np.asarray(laplace.vertex_sigma(jnp.asarray(h)))
+  np.testing.assert_allclose(sigma[unseen], laplace.prior_sigma(LAM), rtol=1e-6)
+  assert np.all(sigma[~unseen] <= laplace.prior_sigma(LAM) * (1. + 1e-6))
+
+
+def test_zero_sensitivity_gives_the_prior_without_nan(setup):
+  config, params, pool = setup
+  flat = jax.tree_util.tree_map(jnp.zeros_like, params)  # Constant field: dx rgb = 0.
+  rays = take(pool['rays'], np.arange(3, 600, 120))
+  h = np.asarray(laplace.hessian_diagonal(config, flat, rays, -1., 1., 1, LAM, chunk=4))
+  assert np.all(np.isfinite(h))
+  np.testing.assert_array_equal(h, np.float32(2. * LAM))
+  sigma = laplace.vertex_sigma(jnp.asarray(h))
+  u, rgb = uncertainty.render_uncertainty(config, flat, sigma, rays, -1., 1., chunk=4,
+                                          u_bg=laplace.prior_sigma(LAM))
+  assert u.shape == (5,) and rgb.shape == (5, 3)
+  assert np.all(np.isfinite(u))
+  np.testing.assert_allclose(u, laplace.prior_sigma(LAM), rtol=1e-5)
+
+
+def test_vertex_sigma_pass_is_hessian_diagonal_then_vertex_sigma(setup):
+  config, params, pool = setup
+  config = dataclasses.replace(config, deform_log2_res=1, hessian_lambda=LAM)
+  rays = take(pool['rays'], HESSIAN_RAYS)
+  sigma, seconds = laplace.vertex_sigma_pass(config, params, rays, -1., 1., 4)
+  h = laplace.hessian_diagonal(config, params, rays, -1., 1., 1, LAM, chunk=4)
+  np.testing.assert_array_equal(sigma, laplace.vertex_sigma(h))
+  assert sigma.shape == (27,) and seconds > 0.
