@@ -5,7 +5,7 @@ import sys
 from renerf_jax import cli, report, resume
 from renerf_jax.configs import exit_on_error
 from renerf_jax.datasets import load_scene
-from renerf_jax.renerf import check_rounds_config, rounds_table
+from renerf_jax.renerf import check_rounds_config, deltas_vs_baseline, rounds_table
 
 
 @exit_on_error
@@ -19,8 +19,12 @@ def main(argv=None):
   state = resume.run_rounds(config, scene, run_dir)
   table = rounds_table(state.metrics)
   report.write_json(os.path.join(run_dir, 'rounds.json'), list(state.metrics))
-  report.write_markdown(os.path.join(run_dir, 'rounds.md'), table + '\n')
+  deltas = deltas_vs_baseline(state.metrics)
+  report.write_markdown(os.path.join(run_dir, 'rounds.md'),
+                        table + '\n' + ''.join(f'\n{d}\n' for d in deltas))
   print(table)
+  for line in deltas:
+    print(line)
 
 
 if __name__ == '__main__':

@@ -41,7 +41,7 @@ def child(config_path, bindings, cache_dir):
 
   def step(cfg, state, i):
     t = time.perf_counter()
-    state, stats = training.train_step(cfg, cam, 0, state, pools, jax.random.PRNGKey(i))
+    state, stats = training.train_step(cfg, cam, False, state, pools, jax.random.PRNGKey(i))
     jax.block_until_ready(stats)
     return state, time.perf_counter() - t
 

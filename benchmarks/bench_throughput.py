@@ -81,7 +81,7 @@ def bench_train(config, scene, repeats, at_fraction=0.):
   holder = [state]  # train_step donates its state: thread it through the calls.
 
   def step():
-    holder[0], stats = training.train_step(config, cam, 0, holder[0], pools, key)
+    holder[0], stats = training.train_step(config, cam, False, holder[0], pools, key)
     return stats
 
   sec = _time_calls(step, repeats, warmups=2)

@@ -47,12 +47,12 @@ def bench(config_path, bindings, steps):
                                        jax.random.PRNGKey(0)).compile()
   compile_s = time.perf_counter() - t
   flops = float(compiled.cost_analysis().get('flops', float('nan')))
-  state, stats = training.train_step(config, cam, 0, state, pools, jax.random.PRNGKey(0))
+  state, stats = training.train_step(config, cam, False, state, pools, jax.random.PRNGKey(0))
   jax.block_until_ready(stats)
   times = []
   for i in range(steps):
     t = time.perf_counter()
-    state, stats = training.train_step(config, cam, 0, state, pools, jax.random.PRNGKey(i + 1))
+    state, stats = training.train_step(config, cam, False, state, pools, jax.random.PRNGKey(i + 1))
     jax.block_until_ready(stats)
     times.append(time.perf_counter() - t)
   sec = float(np.median(times))

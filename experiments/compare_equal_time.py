@@ -40,12 +40,12 @@ def seconds_per_step(config, scene, steps):
   pools = make_pools(config, scene, None)
   cam = training.Camera.of(scene)
   state = training.init_state(config, jax.random.PRNGKey(0))
-  state, stats = training.train_step(config, cam, 0, state, pools, jax.random.PRNGKey(0))
+  state, stats = training.train_step(config, cam, False, state, pools, jax.random.PRNGKey(0))
   jax.block_until_ready(stats)
   times = []
   for i in range(steps):
     t = time.perf_counter()
-    state, stats = training.train_step(config, cam, 0, state, pools, jax.random.PRNGKey(i))
+    state, stats = training.train_step(config, cam, False, state, pools, jax.random.PRNGKey(i))
     jax.block_until_ready(stats)
     times.append(time.perf_counter() - t)
   return float(np.median(times))

@@ -28,7 +28,7 @@ bindings = ['Config.num_rounds = 1', 'Config.use_masks = True', 'Config.deform_l
             'Config.hessian_rays = 4096', 'Config.mask_keep_frac = 0.8']
 if SMALL:  # seconds instead of minutes
   bindings += ['Config.procedural_size = (32, 40)', 'Config.max_steps = 30', 'Config.net_width = 32',
-               'Config.num_samples = 8', 'Config.pseudo_until = 15', 'Config.eval_every = 15',
+               'Config.num_samples = 8', 'Config.pseudo_until_frac = 0.7', 'Config.eval_every = 15',
                'Config.hessian_rays = 256', 'Config.deform_log2_res = 2', "Config.lpips_nets = ('alex',)"]
 config = load_config([os.path.join(repo, 'gin_configs', 'demo.gin')], bindings)
 scene = load_scene(config)

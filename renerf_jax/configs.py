@@ -133,10 +133,16 @@ class Config:
   # --- Re-Nerfing ---
   num_rounds: int = _f(0, 'rounds')
   # Re-Nerfing rounds after the baseline (0: baseline only).
-  pseudo_frac: float = _f(0.5, 'd_training')
-  # Fraction of each batch drawn from pseudo-views while on.
-  pseudo_until: int = _f(5000, 'd_training')
-  # K: pseudo-view rays only for steps < K (RegNeRF: 5000/69768).
+  pseudo_mix: str = _f('pixels', 'd_training')
+  # How D draws rays while the pseudo-views are on: 'pixels' (the paper: they are "part of
+  # the training images": rays uniform over every usable pixel of the real and the
+  # pseudo-views together; masked pseudo pixels are never drawn) or 'fraction' (a fixed
+  # pseudo_frac of each batch from the pseudo-views, masked pixels drawn with weight 0).
+  pseudo_frac: float = _f(0.5, 'd_training')  # The pseudo share with pseudo_mix='fraction'.
+  pseudo_until_frac: float = _f(0.072, 'd_training')
+  # K as a fraction of max_steps: pseudo-view rays only for steps < K (RegNeRF's MLP:
+  # 5000 / 69768 = 7.2%; the grid configs set their own). Never before the near/far
+  # annealing ends.
   pseudo_schedule: str = _f('early', 'd_training')
   # Table "why": 'early' (steps < K, the method), 'all'
   # (keep to the end) or 'late' (only the last K steps).
@@ -188,7 +194,21 @@ class Config:
            f'Config.pseudo_schedule={self.pseudo_schedule!r} (early, all or late)')
     _check(self.renerf_init in ('reset', 'continue'),
            f'Config.renerf_init={self.renerf_init!r} (reset or continue)')
+    _check(self.pseudo_mix in ('pixels', 'fraction'),
+           f'Config.pseudo_mix={self.pseudo_mix!r} (pixels or fraction)')
+    _check(0. <= self.pseudo_frac <= 1.,
+           f'Config.pseudo_frac={self.pseudo_frac} must lie in [0, 1]')
+    _check(0. <= self.pseudo_until_frac <= 1.,
+           f'Config.pseudo_until_frac={self.pseudo_until_frac} must lie in [0, 1] (K as '
+           f'a fraction of Config.max_steps)')
     _check(self.max_steps > 0, f'Config.max_steps={self.max_steps} must be > 0')
+    k = pseudo_steps(self)
+    _check(self.num_rounds == 0 or self.pseudo_schedule != 'early' or not self.anneal_nearfar
+           or k >= min(self.anneal_nearfar_steps, self.max_steps),
+           f'Config.pseudo_until_frac={self.pseudo_until_frac} puts K at step {k} of '
+           f'{self.max_steps}, before the near/far annealing ends (step '
+           f'{self.anneal_nearfar_steps}); raise it to at least '
+           f'{min(self.anneal_nearfar_steps, self.max_steps) / self.max_steps:.4f}')
     _check(self.batch_size > 0, f'Config.batch_size={self.batch_size} must be > 0')
     _check(self.num_samples >= 2, f'Config.num_samples={self.num_samples} must be >= 2')
     _check(self.num_levels >= 1, f'Config.num_levels={self.num_levels} must be >= 1')
@@ -199,6 +219,11 @@ class Config:
            f'Config.image_downsample={self.image_downsample} must be >= 1')
     _check(self.hessian_chunk >= 1, f'Config.hessian_chunk={self.hessian_chunk} must be >= 1')
     _check(self.render_chunk >= 1, f'Config.render_chunk={self.render_chunk} must be >= 1')
+
+
+def pseudo_steps(config) -> int:
+  """K in steps: round(Config.pseudo_until_frac * Config.max_steps)."""
+  return int(round(config.pseudo_until_frac * config.max_steps))
 
 
 def field_category(name: str) -> str:

@@ -63,11 +63,16 @@ def regularizer_poses(config, scene):
 
 
 def make_pools(config, scene, pseudo: Optional[PseudoViews]):
-  """Training pools: real views, pseudo-views (if any), random poses (if depth TV)."""
+  """Training pools: real views, pseudo-views (if any: 'mixed' with the real rays for
+  Config.pseudo_mix='pixels', 'pseudo' alone for 'fraction'), random poses (depth TV)."""
   pools = {'real': ray_pool(scene, scene.train_idx)}
   if pseudo is not None:
-    pools['pseudo'] = ray_pool(scene, None, images=pseudo.images, masks=pseudo.masks,
-                               poses=pseudo.poses)
+    pool = ray_pool(scene, None, images=pseudo.images, masks=pseudo.masks,
+                    poses=pseudo.poses)
+    if config.pseudo_mix == 'pixels':
+      pools['mixed'] = training.mixed_pool(pools['real'], pool)
+    else:
+      pools['pseudo'] = pool
   poses = regularizer_poses(config, scene)
   if poses is not None:
     pools['random_poses'] = poses
@@ -208,3 +213,15 @@ def rounds_table(metrics):
           ('cumulative_seconds', 'cum. time [s]')]
   return report.markdown_table(rows, [c for c in cols if c[0] == 'name' or
                                       any(c[0] in m for m in metrics)])
+
+
+def deltas_vs_baseline(metrics):
+  """One line per round r >= 1: its metrics minus the baseline's, whatever the sign."""
+  base, lines = metrics[0], []
+  for m in metrics[1:]:
+    parts = [f"{name} {m[k] - base[k]:+.{d}f}" for k, name, d in
+             (('psnr', 'PSNR', 2), ('ssim', 'SSIM', 3), ('lpips_alex', 'LPIPS-alex', 3))
+             if k in m and k in base]
+    lines.append(f"R{m['round']} - baseline: " + ', '.join(parts) + ' (PSNR in dB; '
+                 'higher PSNR / SSIM and lower LPIPS are better)')
+  return lines

@@ -1,7 +1,7 @@
 """Training one model: TrainState, RegNeRF's lr schedule, the jitted step, the loop.
 
-The step is a pure function `train_step(config, cam, n_pseudo, state, pools, key)`
-jitted with (config, cam, n_pseudo) static: regularisers a config switches off, and the
+The step is a pure function `train_step(config, cam, pseudo_on, state, pools, key)`
+jitted with (config, cam, pseudo_on) static: regularisers a config switches off, and the
 pseudo-view pool once it is dropped, are not traced at all.
 """
 import dataclasses
@@ -18,6 +18,7 @@ import optax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from renerf_jax import cameras, metrics, regularizers, rundir
+from renerf_jax.configs import pseudo_steps
 from renerf_jax.fields import frequency_mask, init_field_params
 from renerf_jax.model import render_rays
 from renerf_jax.progress import progress_bar
@@ -121,6 +122,55 @@ def random_patch_rays(poses, key, n_patches, patch, cam: Camera) -> cameras.Rays
                             cam.near, cam.far)
 
 
+def mixed_pool(real, pseudo):
+  """One pool of the real rays and the usable pseudo-view rays (Config.pseudo_mix='pixels').
+
+  Drawing uniformly from it draws every usable pixel of the real and the pseudo-views
+  with the same probability (the paper uses the pseudo-views "as part of the training
+  images"); pseudo pixels with a zero mask are left out, so they are never drawn.
+
+  Args:
+    real, pseudo: pools {'rays', 'rgb', 'lossmult'} (see datasets.ray_pool).
+
+  Returns:
+    The pool with an extra 'is_pseudo' [P, 1] (1 for a pseudo-view ray).
+  """
+  keep = np.flatnonzero(np.asarray(pseudo['lossmult'])[:, 0] > 0)
+  kept = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[keep], pseudo)
+  pool = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), real, kept)
+  pool['is_pseudo'] = jnp.concatenate([jnp.zeros((real['rgb'].shape[0], 1), jnp.float32),
+                                       jnp.ones((keep.size, 1), jnp.float32)])
+  return pool
+
+
+def pseudo_rays_per_batch(config) -> int:
+  """Pseudo rays in a batch with Config.pseudo_mix='fraction' (a multiple of the devices)."""
+  n = int(round(config.pseudo_frac * config.batch_size))
+  return n - n % jax.local_device_count()
+
+
+def draw_batch(config, pools, pseudo_on: bool, k_real, k_pseudo):
+  """The rays of one step and how many of them come from pseudo-views.
+
+  Args:
+    config: static Config. pools: see train_step.
+    pseudo_on: static; whether the pseudo-views are on at this step.
+    k_real, k_pseudo: PRNG keys of the real (or mixed) and the pseudo-view draws.
+
+  Returns:
+    (batch {'rays', 'rgb', 'lossmult'} of config.batch_size rays, pseudo ray count).
+  """
+  if pseudo_on and config.pseudo_mix == 'pixels':
+    batch = sample_from_pool(pools['mixed'], k_real, config.batch_size)
+    return batch, jnp.sum(batch.pop('is_pseudo'))
+  n_pseudo = pseudo_rays_per_batch(config) if pseudo_on else 0
+  batch = sample_from_pool(pools['real'], k_real, config.batch_size - n_pseudo)
+  if n_pseudo > 0:
+    pseudo = sample_from_pool(pools['pseudo'], k_pseudo, n_pseudo)
+    batch = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), batch, pseudo)
+  return batch, jnp.asarray(n_pseudo, jnp.float32)
+
+
 def masked_mse(rgb, gt, lossmult):
   """sum(m (rgb - gt)^2) / (3 sum(m)); an all-masked batch gives 0 (finite), not NaN."""
   num = jnp.sum(lossmult * (rgb - gt)**2)
@@ -187,15 +237,15 @@ def loss_fn(params, config, cam, batch, patches, step, key):
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2), donate_argnums=(3,))
-def train_step(config, cam: Camera, n_pseudo: int, state: TrainState, pools, key):
+def train_step(config, cam: Camera, pseudo_on: bool, state: TrainState, pools, key):
   """One optimisation step.
 
   Args:
     config: static Config. cam: static Camera.
-    n_pseudo: static number of rays drawn from pools['pseudo'] (0: no pseudo-views; the
-      rest of config.batch_size comes from pools['real']).
+    pseudo_on: static; draw pseudo-view rays at this step (Config.pseudo_mix says how).
     state: TrainState.
-    pools: {'real': pool, optionally 'pseudo': pool, 'random_poses': [P, 3, 4]}.
+    pools: {'real': pool, 'random_poses': [P, 3, 4] (depth TV), and while pseudo-views
+      are used 'mixed' (mixed_pool, pseudo_mix='pixels') or 'pseudo' ('fraction')}.
     key: PRNG key of this step.
 
   Returns:
@@ -203,10 +253,7 @@ def train_step(config, cam: Camera, n_pseudo: int, state: TrainState, pools, key
     unchanged and increments state.nan_skips.
   """
   k_real, k_pseudo, k_patch, k_render = jax.random.split(key, 4)
-  batch = sample_from_pool(pools['real'], k_real, config.batch_size - n_pseudo)
-  if n_pseudo > 0:
-    pseudo = sample_from_pool(pools['pseudo'], k_pseudo, n_pseudo)
-    batch = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), batch, pseudo)
+  batch, n_pseudo = draw_batch(config, pools, pseudo_on, k_real, k_pseudo)
   batch = jax.lax.with_sharding_constraint(batch, data_sharding())
   patches = None
   if config.depth_tv_loss_mult > 0:
@@ -221,8 +268,8 @@ def train_step(config, cam: Camera, n_pseudo: int, state: TrainState, pools, key
   updates, new_opt = make_optimizer(config).update(grads, state.opt_state, state.params)
   new_params = optax.apply_updates(state.params, updates)
   keep = lambda new, old: jnp.where(finite, new, old)
-  stats.update(lr=learning_rate(step, config), grad_norm=jnp.sqrt(sum(jnp.sum(g**2) for g in jax.tree_util.tree_leaves(grads))),
-               finite=finite)
+  stats.update(lr=learning_rate(step, config), finite=finite, pseudo_rays=n_pseudo,
+               grad_norm=jnp.sqrt(sum(jnp.sum(g**2) for g in jax.tree_util.tree_leaves(grads))))
   return TrainState(step=state.step + 1,
                     params=jax.tree_util.tree_map(keep, new_params, state.params),
                     opt_state=jax.tree_util.tree_map(keep, new_opt, state.opt_state),
@@ -242,7 +289,7 @@ def _meta_template():
 
 def pseudo_window(config):
   """[start, end) steps in which pseudo-view rays are sampled (Config.pseudo_schedule)."""
-  k = min(config.pseudo_until, config.max_steps)
+  k = min(pseudo_steps(config), config.max_steps)
   return {'early': (0, k), 'all': (0, config.max_steps),
           'late': (config.max_steps - k, config.max_steps)}[config.pseudo_schedule]
 
@@ -271,10 +318,7 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
   if config.batch_size % n_dev:
     raise ValueError(f'Config.batch_size={config.batch_size} is not divisible by the '
                      f'{n_dev} devices')
-  n_pseudo_on = 0
-  if 'pseudo' in pools and window[1] > window[0]:
-    n_pseudo_on = int(round(config.pseudo_frac * config.batch_size))
-    n_pseudo_on -= n_pseudo_on % n_dev
+  has_pseudo = ('pseudo' in pools or 'mixed' in pools) and window[1] > window[0]
   base_key = jax.random.PRNGKey(config.seed)
   k_init, base_key = jax.random.split(base_key)
   template = {'state': init_state(config, k_init, init_params), 'meta': _meta_template()}
@@ -302,8 +346,8 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
           'train_seconds': np.asarray(secs, np.float64)}}, int(state.step))
 
   for step in range(start, config.max_steps):
-    n_pseudo = n_pseudo_on if window[0] <= step < window[1] else 0
-    state, stats = train_step(config, cam, n_pseudo, state, pools,
+    pseudo_on = has_pseudo and window[0] <= step < window[1]
+    state, stats = train_step(config, cam, pseudo_on, state, pools,
                               jax.random.fold_in(base_key, step))
     done = step + 1
     bar.update(1)
@@ -318,7 +362,7 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
       rec = {'step': done, 'train_seconds': train_seconds,
              'time': time_offset + train_seconds, 'loss': float(stats['loss']),
              'psnr': float(stats['psnr']), 'lr': float(stats['lr']),
-             'nan_skips': int(state.nan_skips), 'pseudo_rays': n_pseudo}
+             'nan_skips': int(state.nan_skips), 'pseudo_rays': int(stats['pseudo_rays'])}
       for k in ('depth_tv', 'depth_tv_weight', 'occ'):
         if k in stats:
           rec[k] = float(stats[k])

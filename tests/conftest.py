@@ -38,7 +38,7 @@ def tiny_config(**kw):
               net_width_viewdirs=16, max_deg_point=4, deg_view=2, lr_delay_steps=5,
               depth_tv_maxstep=5, anneal_nearfar_steps=5, n_random_poses=50,
               batch_size_random=64, patch_size=4, print_every=10, eval_every=10,
-              checkpoint_every=10, render_chunk=512, pseudo_until=10,
+              checkpoint_every=10, render_chunk=512, pseudo_until_frac=0.5,
               lpips_nets=('alex',))
   base.update(kw)
   return Config(**base)

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from renerf_jax.configs import Config, default_run_dir, load_config
+from renerf_jax.configs import Config, default_run_dir, load_config, pseudo_steps
 from renerf_jax.errors import ConfigError
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -141,32 +141,35 @@ def test_bad_value_names_the_field():
 
 def test_bindings_do_not_leak_and_config_gin_round_trips(tmp_path):
   from renerf_jax.configs import config_to_gin  # pylint: disable=g-import-not-at-top
-  c = load_config([os.path.join(REPO, 'gin_configs', 'demo.gin')], ['Config.max_steps = 7'])
+  c = load_config([os.path.join(REPO, 'gin_configs', 'demo.gin')],
+                  ['Config.max_steps = 7', 'Config.num_rounds = 0'])
   assert Config().max_steps == 69768  # nothing of the parse leaks into later Configs
   path = tmp_path / 'config.gin'
   path.write_text(config_to_gin(c))
   assert load_config([str(path)]) == c
 
 
-# The configs before the restructuring (commit 6bace58) and the files that give the same
-# Config now, with the fields that tell them apart (their values as the old files gave).
+# The configs before the restructuring (commit 6bace58) and the files that replace them,
+# with the fields that tell them apart. K is a fraction of max_steps now, with the
+# paper's ray mix by default; the table configs keep the issue-7 mix and K.
 OLD_TO_NEW = {
     'llff3_renerf.gin': (('llff3.gin', 'renerf.gin'),
-                         dict(field='mlp', max_steps=69768, num_rounds=3, pseudo_until=5000)),
+                         dict(field='mlp', max_steps=69768, num_rounds=3, pseudo_until_frac=0.072,
+                              pseudo_mix='pixels')),
     'llff3_cpu_renerf.gin': (('llff3_cpu.gin', 'renerf.gin'),
-                             dict(field='mlp', max_steps=2000, num_rounds=3, pseudo_until=1000)),
+                             dict(field='mlp', max_steps=2000, num_rounds=3, pseudo_until_frac=0.072)),
     'llff3_fast_renerf.gin': (('llff3_fast.gin', 'renerf.gin'),
-                              dict(field='grid', max_steps=800, num_rounds=3, pseudo_until=400,
+                              dict(field='grid', max_steps=800, num_rounds=3, pseudo_until_frac=0.27,
                                    anneal_nearfar=False)),
     'llff3_small_renerf.gin': ((os.path.join(TABLES, 'table_small.gin'),),
                                dict(field='grid', max_steps=400, batch_size=1024,
                                     image_downsample=2, anneal_nearfar=True, num_rounds=3,
-                                    pseudo_until=200, hessian_rays=16384, eval_stride=4,
+                                    pseudo_until_frac=0.5, pseudo_mix='fraction', hessian_rays=16384, eval_stride=4,
                                     lpips_nets=('alex',))),
     'llff3_tiny_renerf.gin': ((os.path.join(TABLES, 'table_tiny.gin'),),
                               dict(field='grid', max_steps=400, batch_size=512,
                                    image_downsample=4, anneal_nearfar=True, num_rounds=3,
-                                   pseudo_until=200, hessian_rays=8192, eval_stride=2,
+                                   pseudo_until_frac=0.5, pseudo_mix='fraction', hessian_rays=8192, eval_stride=2,
                                    lpips_nets=('alex',))),
 }
 # What every old *_renerf.gin set: the method's settings (Config's defaults) and 3 rounds.
@@ -188,14 +191,14 @@ def test_old_configs_map_to_new_files(old):
                                       ('llff3.gin', m) for m in MODIFIERS])
 def test_renerf_gin_on_any_base_adds_only_the_rounds(base):
   """renerf.gin stacked after a base changes num_rounds to 3 and nothing else; K
-  (pseudo_until) and the method's settings are the base's (Config's defaults)."""
+  (pseudo_until_frac) and the method's settings are the base's (Config's defaults)."""
   base = base if isinstance(base, tuple) else (base,)
   c, b = _gin(*base, 'renerf.gin'), _gin(*base)
   assert c.num_rounds == 3
   assert dataclasses.replace(c, num_rounds=b.num_rounds) == b
   # K comes after the near/far annealing (when on), the depth-TV decay and the warm-up.
-  assert c.pseudo_until > max(c.anneal_nearfar_steps * c.anneal_nearfar, c.depth_tv_maxstep,
-                              c.lr_delay_steps)
+  assert pseudo_steps(c) > max(c.anneal_nearfar_steps * c.anneal_nearfar,
+                               c.depth_tv_maxstep, c.lr_delay_steps)
 
 
 def test_table_configs_include_a_base_and_renerf_only():
@@ -216,14 +219,15 @@ def test_small_table_config_is_the_fast_one_smaller():
   fast = _gin('llff3_fast.gin', 'renerf.gin')
   assert small.image_downsample == 2 and fast.image_downsample == 1
   assert small.max_steps < fast.max_steps and small.batch_size < fast.batch_size
+  assert pseudo_steps(small) == small.max_steps // 2 and small.pseudo_mix == 'fraction'
   for c in (small, fast):
-    assert c.pseudo_until == c.max_steps // 2
-    assert c.pseudo_until > max(c.depth_tv_maxstep, c.lr_delay_steps)
+    assert pseudo_steps(c) > max(c.depth_tv_maxstep, c.lr_delay_steps)
   assert (small.lr_delay_steps / small.max_steps) == pytest.approx(
       fast.lr_delay_steps / fast.max_steps, rel=0.3)
   assert small.anneal_nearfar and not fast.anneal_nearfar
   sizes = ('anneal_nearfar', 'image_downsample', 'batch_size', 'batch_size_random', 'max_steps',
-           'anneal_nearfar_steps', 'lr_delay_steps', 'depth_tv_maxstep', 'pseudo_until',
+           'anneal_nearfar_steps', 'lr_delay_steps', 'depth_tv_maxstep', 'pseudo_until_frac',
+           'pseudo_mix',
            'eval_every', 'eval_stride', 'checkpoint_every', 'hessian_rays', 'lpips_nets')
   assert dataclasses.replace(small, **{k: getattr(fast, k) for k in sizes}) == fast
 
@@ -241,3 +245,22 @@ def test_tiny_table_config_is_the_small_one_at_quarter_resolution():
   assert tiny.eval_stride * tiny.image_downsample == small.eval_stride * small.image_downsample
   sizes = ('image_downsample', 'batch_size', 'hessian_rays', 'eval_stride')
   assert dataclasses.replace(tiny, **{k: getattr(small, k) for k in sizes}) == small
+
+
+def test_bad_ray_mix_or_k_is_one_config_error():
+  with pytest.raises(ConfigError, match='pseudo_mix'):
+    load_config([], ["Config.pseudo_mix = 'half'"])
+  for k in (-0.1, 1.5):
+    with pytest.raises(ConfigError, match=r'pseudo_until_frac=.* must lie in \[0, 1\]'):
+      load_config([], [f'Config.pseudo_until_frac = {k}'])
+  # K before the near/far annealing ends (llff3: 512 steps) is refused with rounds on ...
+  with pytest.raises(ConfigError, match='before the near/far annealing ends') as e:
+    load_config(['llff3.gin', 'renerf.gin'], ['Config.pseudo_until_frac = 0.007'])
+  assert '\n' not in str(e.value) and '0.0073' in str(e.value)
+  # ... and accepted where it cannot matter: no rounds, no annealing, or K unused.
+  load_config(['llff3.gin'], ['Config.pseudo_until_frac = 0.007'])
+  load_config(['llff3.gin', 'renerf.gin'], ['Config.pseudo_until_frac = 0.007',
+                                            'Config.anneal_nearfar = False'])
+  load_config(['llff3.gin', 'renerf.gin'], ['Config.pseudo_until_frac = 0.007',
+                                            "Config.pseudo_schedule = 'all'"])
+  assert pseudo_steps(load_config(['llff3.gin', 'renerf.gin'])) == 5023  # 7.2% of 69768

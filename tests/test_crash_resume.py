@@ -43,7 +43,7 @@ BINDINGS = [
     'Config.net_width = 32', 'Config.skip_layer = 1', 'Config.net_width_viewdirs = 16',
     'Config.max_deg_point = 4', 'Config.deg_view = 2', 'Config.n_random_poses = 50',
     'Config.batch_size_random = 64', 'Config.patch_size = 4', 'Config.num_rounds = 1',
-    'Config.pseudo_until = 100', 'Config.print_every = 20', 'Config.eval_every = 100',
+    'Config.pseudo_until_frac = 0.5', 'Config.print_every = 20', 'Config.eval_every = 100',
     'Config.eval_stride = 4', 'Config.checkpoint_every = 40', 'Config.render_chunk = 512',
     "Config.lpips_nets = ('alex',)"]
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'avg_err')

@@ -46,7 +46,7 @@ def _cli(args, cwd=REPO, timeout=900):
 
 TINY = ['--gin_bindings=Config.procedural_size=(32, 40)', '--gin_bindings=Config.max_steps=30',
         '--gin_bindings=Config.net_width=32', '--gin_bindings=Config.num_samples=8',
-        '--gin_bindings=Config.pseudo_until=15', '--gin_bindings=Config.eval_every=15',
+        '--gin_bindings=Config.pseudo_until_frac=0.7', '--gin_bindings=Config.eval_every=15',
         "--gin_bindings=Config.lpips_nets=('alex',)"]
 
 

@@ -220,7 +220,7 @@ def test_single_training_view_cli_exits_2_with_one_error_line(tmp_path):
 
 def test_single_training_view_fallback_trains_finite():
   config = tiny_config(n_input_views=1, num_rounds=1, pseudo_targets='test', max_steps=8,
-                       pseudo_until=8, eval_every=0, lpips_nets=())
+                       pseudo_until_frac=1., eval_every=0, lpips_nets=())
   scene = load_scene(config)
   state = renerf.run_rounds(config, scene)  # in memory
   assert [m['round'] for m in state.metrics] == [0, 1]
@@ -255,7 +255,7 @@ def test_two_identical_cameras_give_valid_interpolated_poses(sequencing):
 
 def test_two_identical_cameras_train_finite_through_a_round():
   # Depth TV stays on: its random poses come from the degenerate (one-point) camera box.
-  config = tiny_config(n_input_views=2, num_rounds=1, max_steps=8, pseudo_until=8,
+  config = tiny_config(n_input_views=2, num_rounds=1, max_steps=8, pseudo_until_frac=1.,
                        eval_every=4, lpips_nets=())
   scene = _identical_cameras_scene(config)
   poses = renerf.regularizer_poses(config, scene)

@@ -298,7 +298,7 @@ def test_training_fits_the_procedural_scene(scene):
   state = training.init_state(config, None, params)
   mses = []
   for step in range(steps):
-    state, stats = training.train_step(config, cam, 0, state, pools,
+    state, stats = training.train_step(config, cam, False, state, pools,
                                        jax.random.PRNGKey(step))
     if step >= steps - 25:
       mses.append(float(stats['mse']))

@@ -97,5 +97,5 @@ def test_freenerf_regularisers_train_on_both_fields(field):
   state = training.init_state(config, jax.random.PRNGKey(0))
   cam = training.Camera.of(scene)
   for i in range(2):
-    state, stats = training.train_step(config, cam, 0, state, pools, jax.random.PRNGKey(i))
+    state, stats = training.train_step(config, cam, False, state, pools, jax.random.PRNGKey(i))
   assert bool(stats['finite']) and float(stats['occ']) >= 0.

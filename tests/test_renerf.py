@@ -32,7 +32,7 @@ def test_round_state_is_a_pytree_of_arrays_with_static_bookkeeping():
 
 def test_round_step_is_pure_and_equals_the_persisted_round(tmp_path, monkeypatch):
   """The in-memory step writes nothing and gives what the run-directory edge stores."""
-  config = tiny_config(num_rounds=1, max_steps=10, pseudo_until=5, use_masks=True,
+  config = tiny_config(num_rounds=1, max_steps=10, pseudo_until_frac=0.5, use_masks=True,
                        deform_log2_res=2, hessian_rays=128)
   scene = load_scene(config)
   monkeypatch.chdir(tmp_path)
@@ -75,7 +75,7 @@ def test_pseudo_view_poses_7x_on_three_views():
 
 
 def test_rounds_schedule_resume_and_masks(tmp_path):
-  config = tiny_config(num_rounds=1, max_steps=20, pseudo_until=10, use_masks=True,
+  config = tiny_config(num_rounds=1, max_steps=20, pseudo_until_frac=0.5, use_masks=True,
                        deform_log2_res=2, hessian_rays=256, mask_keep_frac=0.7)
   scene = load_scene(config)
   run_dir = str(tmp_path / 'run')
@@ -106,7 +106,7 @@ def test_rounds_schedule_resume_and_masks(tmp_path):
 
 
 def test_all_masked_pseudo_views_still_train_on_real_views(tmp_path):
-  config = tiny_config(num_rounds=1, max_steps=10, pseudo_until=10, use_masks=True,
+  config = tiny_config(num_rounds=1, max_steps=10, pseudo_until_frac=1., use_masks=True,
                        deform_log2_res=1, hessian_rays=64, mask_threshold=0.)
   scene = load_scene(config)
   state = resume.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)

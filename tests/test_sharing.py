@@ -32,7 +32,7 @@ def test_sharing_rules_derive_from_the_config_field_categories():
   for f in dataclasses.fields(configs.Config):
     assert configs.field_category(f.name) in configs.AFFECTS, f.name
   assert 'lr_init' not in sharing.ROUND_FIELDS and 'seed' not in sharing.ROUND_FIELDS
-  assert {'num_rounds', 'pseudo_until', 'use_masks', 'hessian_rays'} <= set(
+  assert {'num_rounds', 'pseudo_until_frac', 'pseudo_mix', 'use_masks', 'hessian_rays'} <= set(
       sharing.ROUND_FIELDS)
   # Logging and evaluation settings change what a baseline reports: not shared across.
   assert 'eval_stride' not in sharing.ROUND_FIELDS
@@ -154,7 +154,7 @@ def test_lru_cache_keeps_recent_entries_within_its_budgets():
 
 
 def test_finished_rounds_of_a_run_with_the_same_config_are_copied_not_retrained(tmp_path):
-  config = tiny_config(max_steps=10, num_rounds=1, pseudo_until=5)
+  config = tiny_config(max_steps=10, num_rounds=1, pseudo_until_frac=0.5)
   scene = load_scene(config)
   src, dst = str(tmp_path / 'src'), str(tmp_path / 'dst')
   from renerf_jax import cli  # pylint: disable=g-import-not-at-top

@@ -45,7 +45,7 @@ def _run(config, scene, pools, n):
   state = training.init_state(config, jax.random.PRNGKey(config.seed))
   cam = training.Camera.of(scene)
   for i in range(n):
-    state, stats = training.train_step(config, cam, 0, state, pools, jax.random.PRNGKey(i))
+    state, stats = training.train_step(config, cam, False, state, pools, jax.random.PRNGKey(i))
   return state, stats
 
 
@@ -55,12 +55,12 @@ def test_non_finite_step_is_skipped_and_counted():
   before = jax.tree_util.tree_map(np.array, state.params)  # copies (state is donated)
   bad = dict(pools, real=dict(pools['real'], rgb=pools['real']['rgb'] * np.nan))
   cam = training.Camera.of(scene)
-  state, stats = training.train_step(config, cam, 0, state, bad, jax.random.PRNGKey(7))
+  state, stats = training.train_step(config, cam, False, state, bad, jax.random.PRNGKey(7))
   assert not bool(stats['finite'])
   assert int(state.nan_skips) == 1 and int(state.step) == 3
   jax.tree_util.tree_map(np.testing.assert_array_equal, before,
                          jax.tree_util.tree_map(np.asarray, state.params))
-  state, stats = training.train_step(config, cam, 0, state, pools, jax.random.PRNGKey(8))
+  state, stats = training.train_step(config, cam, False, state, pools, jax.random.PRNGKey(8))
   assert bool(stats['finite']) and int(state.nan_skips) == 1
 
 
@@ -124,7 +124,7 @@ pools = {{'real': ray_pool(scene, scene.train_idx)}}
 state = training.init_state(config, jax.random.PRNGKey(0))
 cam = training.Camera.of(scene)
 for i in range(3):
-  state, stats = training.train_step(config, cam, 0, state, pools, jax.random.PRNGKey(i))
+  state, stats = training.train_step(config, cam, False, state, pools, jax.random.PRNGKey(i))
 print(jax.device_count(), float(stats['loss']))
 '''
 
@@ -146,7 +146,7 @@ def test_data_parallel_on_two_host_devices_matches_one():
 @pytest.mark.parametrize('schedule,window', [('early', (0, 30)), ('all', (0, 100)),
                                              ('late', (70, 100))])
 def test_pseudo_windows_of_the_ablation_schedules(schedule, window):
-  c = tiny_config(max_steps=100, pseudo_until=30, pseudo_schedule=schedule)
+  c = tiny_config(max_steps=100, pseudo_until_frac=0.3, pseudo_schedule=schedule)
   assert training.pseudo_window(c) == window
 
 
@@ -174,3 +174,65 @@ def test_train_model_compiles_the_step_once(tmp_path):
   result = training.train_model(config, scene, str(tmp_path), pools, show_progress=False)
   assert int(result.state.step) == 3
   assert training.train_step._cache_size() - before == 1
+
+
+def _pseudo_pools(config, usable):
+  """Pools of the tiny scene with 4 pseudo-views whose masked pixels have colour 7."""
+  from renerf_jax.pseudo_views import PseudoViews  # pylint: disable=g-import-not-at-top
+  from renerf_jax.renerf import make_pools  # pylint: disable=g-import-not-at-top
+  scene = load_scene(config)
+  m, h, w = 4, scene.height, scene.width
+  rng = np.random.default_rng(0)
+  masks = (rng.random((m, h, w)) < usable).astype(np.float32)
+  images = np.where(masks[..., None] > 0, np.full((m, h, w, 3), 0.5), 7.).astype(np.float32)
+  poses = np.asarray(scene.poses[scene.test_idx[:1]].repeat(m, 0), np.float32)
+  pv = PseudoViews(images=images, poses=poses, masks=masks, uncertainty=np.zeros_like(masks))
+  return make_pools(config, scene, pv), masks
+
+
+def test_pixel_mix_draws_every_usable_pixel_alike_and_no_masked_one():
+  config = tiny_config(batch_size=256, pseudo_mix='pixels')
+  pools, masks = _pseudo_pools(config, usable=0.3)
+  assert set(pools) == {'real', 'mixed', 'random_poses'}
+  n_real = pools['real']['rgb'].shape[0]
+  n_usable = int(masks.sum())
+  assert pools['mixed']['rgb'].shape[0] == n_real + n_usable
+  share = n_usable / (n_real + n_usable)  # 4 * 0.3 / (3 + 4 * 0.3) ~ 0.29
+  draw = jax.jit(lambda k: training.draw_batch(config, pools, True, k, k))
+  counts, masked = [], 0
+  for i in range(200):
+    batch, n_pseudo = draw(jax.random.PRNGKey(i))
+    assert set(batch) == {'rays', 'rgb', 'lossmult'}
+    counts.append(float(n_pseudo))
+    masked += int(np.sum(np.asarray(batch['rgb']) == 7.))
+    assert np.all(np.asarray(batch['lossmult']) == 1.)
+  assert masked == 0  # never drawn (not drawn with weight 0)
+  observed = np.sum(counts) / (200 * config.batch_size)
+  sampling_sd = np.sqrt(share * (1 - share) / (200 * config.batch_size))
+  assert abs(observed - share) < 4 * sampling_sd, (observed, share)
+  # Off the window: real rays only.
+  batch, n_pseudo = jax.jit(lambda k: training.draw_batch(config, pools, False, k, k))(
+      jax.random.PRNGKey(0))
+  assert float(n_pseudo) == 0 and batch['rgb'].shape[0] == config.batch_size
+
+
+def test_fraction_mix_draws_a_fixed_share_with_masked_pixels_at_weight_zero():
+  config = tiny_config(batch_size=256, pseudo_mix='fraction', pseudo_frac=0.25)
+  pools, _ = _pseudo_pools(config, usable=0.3)
+  assert set(pools) == {'real', 'pseudo', 'random_poses'}
+  batch, n_pseudo = jax.jit(lambda k: training.draw_batch(config, pools, True, k, k))(
+      jax.random.PRNGKey(1))
+  assert float(n_pseudo) == 64
+  rgb, lossmult = np.asarray(batch['rgb'][192:]), np.asarray(batch['lossmult'][192:, 0])
+  assert np.all((rgb[:, 0] == 7.) == (lossmult == 0.))  # masked: drawn, weight 0
+  assert np.any(lossmult == 0.)
+
+
+def test_all_masked_pseudo_views_leave_a_pixel_mix_of_real_rays_only():
+  config = tiny_config(batch_size=128, pseudo_mix='pixels')
+  pools, _ = _pseudo_pools(config, usable=0.)
+  assert pools['mixed']['rgb'].shape == pools['real']['rgb'].shape
+  state = training.init_state(config, jax.random.PRNGKey(0))
+  cam = training.Camera.of(load_scene(config))
+  state, stats = training.train_step(config, cam, True, state, pools, jax.random.PRNGKey(2))
+  assert float(stats['pseudo_rays']) == 0 and np.isfinite(float(stats['loss']))
