@@ -369,9 +369,9 @@ def config_to_gin(config: Config) -> str:
 
 
 def default_run_dir(gin_configs: Sequence[str]) -> str:
-  """runs/<stem of the last gin file>."""
-  stem = os.path.splitext(os.path.basename(gin_configs[-1]))[0] if gin_configs else 'default'
-  return os.path.join('runs', stem)
+  """runs/<stems of the gin files joined by '+'>, e.g. runs/llff3_cpu+renerf."""
+  stems = [os.path.splitext(os.path.basename(p))[0] for p in gin_configs]
+  return os.path.join('runs', '+'.join(stems) if stems else 'default')
 
 
 def exit_on_error(fn):

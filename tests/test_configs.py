@@ -93,6 +93,9 @@ def test_bare_config_names_resolve_through_gin_configs(tmp_path, monkeypatch):
       _gin('llff3_cpu.gin'), seed=3)
   assert default_run_dir(['llff3']) == default_run_dir(['llff3.gin']) == os.path.join(
       'runs', 'llff3')
+  # Stacked configs name the run after all of them: two bases never share a directory.
+  assert default_run_dir(['gin_configs/llff3_cpu.gin', 'renerf.gin']) == os.path.join(
+      'runs', 'llff3_cpu+renerf')
 
 
 def test_unknown_bare_config_name_is_one_clear_error(tmp_path, monkeypatch):

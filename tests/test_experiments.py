@@ -4,6 +4,8 @@ import subprocess
 import sys
 
 import imageio.v3 as iio
+import numpy as np
+import pytest
 
 from conftest import REPO
 
@@ -129,3 +131,36 @@ def test_metric_curves_follow_each_variant_over_its_rounds():
   assert curves['PSNR'] == {'Re-Nerfing': [(90, 19., .3), (220, 19.5, .3)],
                             'baseline, 900 steps': [(230, 20., .3)]}
   assert curves['LPIPS-alex']['Re-Nerfing'][1] == (220, 1 - 19.5 / 40, 0.)
+
+
+def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path):
+  """experiments/renerf_scenes.py: R1..R3, a masks row trained from the same B, B 2x
+  longer and B at the rounds' total time, with paired deltas and win counts."""
+  out = tmp_path / 'results'
+  cmd = ([sys.executable, 'experiments/renerf_scenes.py', '--name', 's', '--config',
+          'gin_configs/demo.gin', '--out', str(out), '--seeds', '0', '1', '--scenes',
+          'procedural', '--rounds_scenes', 'procedural', '--variant',
+          'R1 + masks=Config.use_masks=True;Config.deform_log2_res=2;'
+          'Config.hessian_rays=256', "--gin_bindings=Config.dataset_loader='procedural'"]
+         + [f'--gin_bindings={b}' for b in TINY])
+  res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=900,
+                       check=False)
+  assert res.returncode == 0, res.stderr[-3000:]
+  result = json.loads((out / 's.json').read_text())
+  rows = result['rows']['procedural']
+  eq = json.loads((out / 's' / 'procedural' / 'equal_time.json').read_text())
+  assert set(rows) == {'B', 'R1', 'R2', 'R3', 'R1 + masks', 'B 2x steps',
+                       f"B equal time ({eq['max_steps']} steps)"}
+  # The masks row is R1 trained from the same B: its round_0 is the Re-Nerfing run's.
+  root = out / 's' / 'procedural'
+  for s in (0, 1):
+    assert ((root / 'R1 + masks' / f'seed{s}' / 'round_0' / 'params.msgpack').read_bytes()
+            == (root / 'Re-Nerfing' / f'seed{s}' / 'round_0' / 'params.msgpack').read_bytes())
+  # Paired deltas are D minus B of the same seed; wins count the pairs D beats B in.
+  paired = result['summary']['scenes']['procedural']['R1']['paired']
+  deltas = [rows['R1'][str(s)]['psnr'] - rows['B'][str(s)]['psnr'] for s in (0, 1)]
+  assert paired['psnr'][0] == pytest.approx(np.mean(deltas))
+  assert paired['psnr'][2] == sum(d > 0 for d in deltas) and paired['psnr'][3] == 2
+  assert result['summary']['mean']['B 2x steps']['pooled']['psnr'][3] == 2
+  md = (out / 's.md').read_text()
+  assert 'B 2x steps' in md and 'wins' in md and (out / 's.png').stat().st_size > 0

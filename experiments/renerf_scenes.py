@@ -1,0 +1,266 @@
+"""Table 1 across scenes with paired seeds (issue 18): does D beat B, and beat more compute?
+
+For every scene and seed: the baseline B, Re-Nerfing R1 (D trained from scratch on the
+real views plus B's pseudo-views), and B trained 2x longer (for R1 also the equal-time
+control). With --rounds_scenes, those scenes also get R2, R3 and B trained for the
+rounds' total time. Extra rows (--variant 'LABEL=bindings', e.g. R1 with the masks or an
+attribution of K, the mix or the factors) train R1 from the same B (copied bit for bit).
+Every number is paired by seed: D minus B of the same (scene, seed), as mean +- std over
+pairs and the count of pairs where D beats B in PSNR, SSIM and LPIPS; the paper's
+per-scene R1 deltas (RegNeRF base, full scale) stand beside ours.
+
+Runs live in <out>/<name>/<scene>/<row>/seed<k> (resumable; finished runs are reused, so
+invocations can be split by scene, seed and variant, each rewriting the table from every
+finished run it finds). The converged-regime config on 2 CPU cores:
+
+  python experiments/renerf_scenes.py --name scenes_converged \
+    --config experiments/configs/table_converged.gin \
+    --scenes fern orchids room trex fortress --seeds 0 1 2 --rounds_scenes fern orchids \
+    --variant 'R1 + masks=Config.use_masks=True'
+
+Writes <out>/<name>.json, <name>.md and <name>.png (paired deltas per scene).
+"""
+import argparse
+import dataclasses
+import os
+import shlex
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import tables  # pylint: disable=g-import-not-at-top
+from renerf_jax import jit_cache, report  # pylint: disable=g-import-not-at-top
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import load_scene
+
+METRICS = ('psnr', 'ssim', 'lpips_alex')
+BETTER = {'psnr': 1., 'ssim': 1., 'lpips_alex': -1.}  # sign of "D beats B"
+# ../shared/REFERENCE_NUMBERS.md: RegNeRF and + R1 (PSNR, SSIM, LPIPS), LLFF 3 views.
+PAPER = {'fern': ((19.87, .697, .202), (19.96, .709, .191)),
+         'flower': ((19.93, .688, .156), (20.28, .711, .143)),
+         'fortress': ((23.32, .743, .065), (23.69, .789, .054)),
+         'horns': ((15.65, .610, .200), (15.75, .654, .179)),
+         'leaves': ((16.60, .612, .132), (16.92, .654, .116)),
+         'orchids': ((15.56, .502, .177), (15.77, .526, .162)),
+         'room': ((21.53, .861, .116), (21.84, .873, .105)),
+         'trex': ((20.16, .766, .133), (20.55, .788, .117))}
+
+
+def paper_delta(scene):
+  if scene not in PAPER:
+    return None
+  b, r1 = PAPER[scene]
+  return dict(zip(METRICS, (round(x - y, 3) for x, y in zip(r1, b))))
+
+
+def parser():
+  p = argparse.ArgumentParser(description=__doc__,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+  p.add_argument('--name', required=True)
+  p.add_argument('--config', nargs='+', required=True, help='gin config file(s)')
+  p.add_argument('--data_dir', default='../shared/data/nerf_llff_data')
+  p.add_argument('--scenes', nargs='+', default=['fern'])
+  p.add_argument('--seeds', type=int, nargs='+', default=[0, 1, 2])
+  p.add_argument('--rounds_scenes', nargs='*', default=[],
+                 help='scenes that also get R2, R3 and B at the rounds\' total time')
+  p.add_argument('--variant', action='append', default=[],
+                 help="extra R1 row 'LABEL=binding;binding' trained from the same B")
+  p.add_argument('--no_2x', action='store_true', help='skip B trained 2x longer')
+  p.add_argument('--gin_bindings', action='append', default=[])
+  p.add_argument('--out', default='experiments/results')
+  return p
+
+
+def run(config, scene, run_dir, share=()):
+  """Per-round metrics of one run (tables.run_seed: resumable, baselines shared)."""
+  return tables.run_seed(config, scene, run_dir, share)[0]
+
+
+def pair_stats(pairs):
+  """pairs: [(D metrics, B metrics)] -> {metric: (mean delta, std, wins, n)}."""
+  out = {}
+  for k in METRICS:
+    d = np.array([dm[k] - bm[k] for dm, bm in pairs if k in dm and k in bm], np.float64)
+    if d.size:
+      out[k] = (float(d.mean()), float(d.std(ddof=1)) if d.size > 1 else 0.,
+                int(np.sum(BETTER[k] * d > 0)), int(d.size))
+  return out
+
+
+def scene_runs(args, scene_name, base_bindings):
+  """Runs every row of one scene; returns {row label: {seed: metrics of that row}}, B's
+  metrics under 'B' and per-row seconds."""
+  root = os.path.join(args.out, args.name, scene_name)
+  bindings = base_bindings + [f'Config.scene = {scene_name!r}']
+  config = load_config(args.config, bindings)
+  scene = load_scene(config)
+  rounds = 3 if scene_name in args.rounds_scenes else 1
+  rows = {}
+  renerf_runs = {}
+  for seed in args.seeds:
+    cfg = dataclasses.replace(config, seed=seed, num_rounds=rounds)
+    ms = run(cfg, scene, os.path.join(root, 'Re-Nerfing', f'seed{seed}'))
+    renerf_runs[seed] = ms
+    for m in ms:
+      rows.setdefault('B' if m['round'] == 0 else f"R{m['round']}", {})[seed] = m
+  for spec in args.variant:
+    label, _, extra = spec.partition('=')
+    cfg0 = load_config(args.config, bindings + [b for b in extra.split(';') if b.strip()])
+    for seed in args.seeds:
+      cfg = dataclasses.replace(cfg0, seed=seed, num_rounds=1)
+      ms = run(cfg, scene, os.path.join(root, label, f'seed{seed}'),
+               [os.path.join(root, 'Re-Nerfing', f'seed{seed}')])
+      rows.setdefault(label, {})[seed] = ms[1]
+  if not args.no_2x:
+    for seed in args.seeds:
+      cfg = dataclasses.replace(config, seed=seed, num_rounds=0,
+                                max_steps=2 * config.max_steps)
+      rows.setdefault('B 2x steps', {})[seed] = run(
+          cfg, scene, os.path.join(root, 'B 2x steps', f'seed{seed}'))[0]
+  if rounds > 1:
+    runs = [renerf_runs[s] for s in args.seeds]
+    dirs = [os.path.join(root, 'Re-Nerfing', f'seed{s}') for s in args.seeds]
+    steps = tables.equal_time_steps(root, config, runs, dirs)
+    for seed in args.seeds:
+      cfg = dataclasses.replace(config, seed=seed, num_rounds=0, max_steps=steps)
+      rows.setdefault(f'B equal time ({steps} steps)', {})[seed] = run(
+          cfg, scene, os.path.join(root, 'B equal time', f'seed{seed}'))[0]
+  return rows
+
+
+def summarize(all_rows, scenes, seeds):
+  """Per scene and over scenes: mean +- std of each row and paired deltas vs B."""
+  out = {'scenes': {}, 'mean': {}}
+  labels = []
+  for sc in scenes:
+    for label in all_rows[sc]:
+      if label not in labels:
+        labels.append(label)
+  for sc in scenes:
+    rows = all_rows[sc]
+    res = {}
+    for label, by_seed in rows.items():
+      entry = {k: tables.mean_std([m[k] for m in by_seed.values()]) for k in METRICS
+               if all(k in m for m in by_seed.values())}
+      entry['seconds'] = tables.mean_std([m['cumulative_seconds'] for m in by_seed.values()])
+      if label != 'B':
+        entry['paired'] = pair_stats([(by_seed[s], rows['B'][s]) for s in seeds
+                                      if s in by_seed and s in rows['B']])
+      res[label] = entry
+    res['paper_R1_delta'] = paper_delta(sc)
+    out['scenes'][sc] = res
+  for label in labels:
+    if label == 'B':
+      continue
+    pairs = [(all_rows[sc][label][s], all_rows[sc]['B'][s]) for sc in scenes
+             if label in all_rows[sc] for s in seeds if s in all_rows[sc][label]]
+    # The mean over scenes of each scene's mean delta, and the pooled pair counts.
+    per_scene = {k: [out['scenes'][sc][label]['paired'][k][0] for sc in scenes
+                     if label in out['scenes'][sc] and k in out['scenes'][sc][label]['paired']]
+                 for k in METRICS}
+    out['mean'][label] = {'pooled': pair_stats(pairs),
+                          'mean_of_scene_means': {k: tables.mean_std(v)
+                                                  for k, v in per_scene.items() if v},
+                          'scenes': sum(label in all_rows[sc] for sc in scenes)}
+  paper = [paper_delta(sc) for sc in scenes if paper_delta(sc)]
+  out['paper_R1_delta_mean'] = {k: round(float(np.mean([p[k] for p in paper])), 3)
+                                for k in METRICS} if paper else None
+  return out
+
+
+def fmt_pair(p, k, d=2):
+  if k not in p:
+    return ''
+  mean, std, wins, n = p[k]
+  return f'{mean:+.{d}f} +- {std:.{d}f} ({wins}/{n})'
+
+
+def markdown(summary, scenes, command):
+  lines = []
+  for sc in scenes:
+    res = summary['scenes'][sc]
+    pd = res['paper_R1_delta']
+    lines += [f'### {sc}', '',
+              '| row | PSNR | SSIM | LPIPS-alex | cum. s | dPSNR (wins) | dSSIM (wins) '
+              '| dLPIPS (wins) |', '|---|---|---|---|---|---|---|---|']
+    for label, e in res.items():
+      if label == 'paper_R1_delta':
+        continue
+      cell = lambda k, d: f'{e[k][0]:.{d}f} +- {e[k][1]:.{d}f}' if k in e else ''
+      p = e.get('paired', {})
+      lines.append(f"| {label} | {cell('psnr', 2)} | {cell('ssim', 3)} | "
+                   f"{cell('lpips_alex', 3)} | {e['seconds'][0]:.0f} | "
+                   f"{fmt_pair(p, 'psnr')} | {fmt_pair(p, 'ssim', 3)} | "
+                   f"{fmt_pair(p, 'lpips_alex', 3)} |")
+    if pd:
+      lines.append(f"| paper R1 - RegNeRF | | | | | {pd['psnr']:+.2f} | {pd['ssim']:+.3f} | "
+                   f"{pd['lpips_alex']:+.3f} |")
+    lines.append('')
+  lines += ['### Over scenes (paired D - B)', '',
+            '| row | scenes | pooled dPSNR (wins) | pooled dSSIM (wins) | pooled dLPIPS (wins) '
+            '| mean of scene means dPSNR |', '|---|---|---|---|---|---|']
+  for label, e in summary['mean'].items():
+    p, m = e['pooled'], e['mean_of_scene_means']
+    mp = f"{m['psnr'][0]:+.2f} +- {m['psnr'][1]:.2f}" if 'psnr' in m else ''
+    lines.append(f"| {label} | {e['scenes']} | {fmt_pair(p, 'psnr')} | "
+                 f"{fmt_pair(p, 'ssim', 3)} | {fmt_pair(p, 'lpips_alex', 3)} | {mp} |")
+  if summary['paper_R1_delta_mean']:
+    pm = summary['paper_R1_delta_mean']
+    lines.append(f"| paper R1 (these scenes) | | {pm['psnr']:+.2f} | {pm['ssim']:+.3f} | "
+                 f"{pm['lpips_alex']:+.3f} | |")
+  lines += ['', 'dX: D minus B of the same (scene, seed), mean +- std over pairs; (wins/n): '
+            'pairs where D beats B (higher PSNR / SSIM, lower LPIPS). Two identical runs differ '
+            'by 0.2-0.5 dB, so a mean delta inside its std is no gain.', '',
+            'Command:', '', f'    {command}', '']
+  return '\n'.join(lines)
+
+
+def plot(summary, scenes, path):
+  import matplotlib  # pylint: disable=g-import-not-at-top
+  matplotlib.use('Agg')
+  import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
+  labels = [lb for lb in summary['mean']]
+  fig, axes = plt.subplots(1, len(METRICS), figsize=(5 * len(METRICS), 3.6))
+  width = 0.8 / max(len(labels), 1)
+  for ax, k in zip(axes, METRICS):
+    for i, label in enumerate(labels):
+      xs, ys, es = [], [], []
+      for j, sc in enumerate(scenes):
+        p = summary['scenes'][sc].get(label, {}).get('paired', {})
+        if k in p:
+          xs.append(j + (i - len(labels) / 2 + 0.5) * width)
+          ys.append(p[k][0])
+          es.append(p[k][1])
+      ax.bar(xs, ys, width, yerr=es, capsize=2, label=label)
+    pd = [summary['scenes'][sc]['paper_R1_delta'] for sc in scenes]
+    ax.scatter([j for j, p in enumerate(pd) if p], [p[k] for p in pd if p], marker='*',
+               color='k', zorder=5, label='paper R1')
+    ax.axhline(0, color='grey', lw=0.8)
+    ax.set_xticks(range(len(scenes)))
+    ax.set_xticklabels(scenes)
+    ax.set_title(f'{k}: D - B (paired by seed)')
+  axes[0].legend(fontsize=7)
+  fig.tight_layout()
+  fig.savefig(path, dpi=100)
+  plt.close(fig)
+
+
+def main(argv=None):
+  args = parser().parse_args(argv)
+  jit_cache.enable_compilation_cache()
+  bindings = args.gin_bindings + [f'Config.data_dir = {args.data_dir!r}']
+  all_rows = {sc: scene_runs(args, sc, bindings) for sc in args.scenes}
+  summary = summarize(all_rows, args.scenes, args.seeds)
+  command = 'python ' + shlex.join(sys.argv)
+  report.write_json(os.path.join(args.out, args.name + '.json'),
+                    {'name': args.name, 'config': args.config, 'seeds': args.seeds,
+                     'rows': all_rows, 'summary': summary, 'command': command})
+  text = markdown(summary, args.scenes, command)
+  report.write_markdown(os.path.join(args.out, args.name + '.md'), text)
+  plot(summary, args.scenes, os.path.join(args.out, args.name + '.png'))
+  print(text)
+
+
+if __name__ == '__main__':
+  main()
