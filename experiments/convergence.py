@@ -5,7 +5,8 @@ gains at most 0.1 dB PSNR and 0.005 SSIM, mean over seeds). The lr schedule depe
 max_steps (log-linear decay over the whole run), so "B at N steps" is a run of its own
 for every N, not an iterate of a longer run. For every scene, seed and N in --steps it
 trains the baseline (round 0 of a run directory <out>/<name>/<scene>/N<N>/seed<k>,
-resumable, reused when finished) and reports, per scene and N, the mean +- std over seeds
+resumable, reused when finished; with the config's other settings unchanged, so that
+experiments/renerf_scenes.py --reuse can copy these runs as its B and its B 2x) and reports, per scene and N, the mean +- std over seeds
 of PSNR / SSIM / LPIPS and the paired gain of 2N over N (same seed).
 
 Invocations can be split by scene or seed; each writes the table of every finished run
@@ -148,8 +149,7 @@ def main(argv=None):
   for scene_name, n, seed in jobs:
     bindings = args.gin_bindings + [
         f"Config.data_dir = {args.data_dir!r}", f"Config.scene = {scene_name!r}",
-        'Config.num_rounds = 0', f'Config.max_steps = {n}', f'Config.seed = {seed}',
-        f'Config.eval_every = {max(n // 10, 1)}', f'Config.checkpoint_every = {max(n // 4, 1)}']
+        'Config.num_rounds = 0', f'Config.max_steps = {n}', f'Config.seed = {seed}']
     config = load_config(args.config, bindings)
     scene = load_scene(config)
     run_dir = run_dir_of(root, scene_name, n, seed)

@@ -16,7 +16,8 @@ finished run it finds). The converged-regime config on 2 CPU cores:
   python experiments/renerf_scenes.py --name scenes_converged \
     --config experiments/configs/table_converged.gin \
     --scenes fern orchids room trex fortress --seeds 0 1 2 --rounds_scenes fern orchids \
-    --variant 'R1 + masks=Config.use_masks=True'
+    --variant 'R1 + masks=Config.use_masks=True' \
+    --reuse experiments/results/converged_curves
 
 Writes <out>/<name>.json, <name>.md and <name>.png (paired deltas per scene).
 """
@@ -67,6 +68,10 @@ def parser():
   p.add_argument('--variant', action='append', default=[],
                  help="extra R1 row 'LABEL=binding;binding' trained from the same B")
   p.add_argument('--no_2x', action='store_true', help='skip B trained 2x longer')
+  p.add_argument('--reuse', default=None,
+                 help='a convergence.py results folder (<out>/<name>): its finished runs '
+                      '<scene>/N<steps>/seed<k> made with the same config (and --data_dir) '
+                      'are copied as B and as B 2x instead of training them again')
   p.add_argument('--gin_bindings', action='append', default=[])
   p.add_argument('--out', default='experiments/results')
   return p
@@ -98,9 +103,12 @@ def scene_runs(args, scene_name, base_bindings):
   rounds = 3 if scene_name in args.rounds_scenes else 1
   rows = {}
   renerf_runs = {}
+  reuse = lambda steps, seed: ([os.path.join(args.reuse, scene_name, f'N{steps}',
+                                             f'seed{seed}')] if args.reuse else [])
   for seed in args.seeds:
     cfg = dataclasses.replace(config, seed=seed, num_rounds=rounds)
-    ms = run(cfg, scene, os.path.join(root, 'Re-Nerfing', f'seed{seed}'))
+    ms = run(cfg, scene, os.path.join(root, 'Re-Nerfing', f'seed{seed}'),
+             reuse(config.max_steps, seed))
     renerf_runs[seed] = ms
     for m in ms:
       rows.setdefault('B' if m['round'] == 0 else f"R{m['round']}", {})[seed] = m
@@ -117,7 +125,8 @@ def scene_runs(args, scene_name, base_bindings):
       cfg = dataclasses.replace(config, seed=seed, num_rounds=0,
                                 max_steps=2 * config.max_steps)
       rows.setdefault('B 2x steps', {})[seed] = run(
-          cfg, scene, os.path.join(root, 'B 2x steps', f'seed{seed}'))[0]
+          cfg, scene, os.path.join(root, 'B 2x steps', f'seed{seed}'),
+          reuse(2 * config.max_steps, seed))[0]
   if rounds > 1:
     runs = [renerf_runs[s] for s in args.seeds]
     dirs = [os.path.join(root, 'Re-Nerfing', f'seed{s}') for s in args.seeds]
