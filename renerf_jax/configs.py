@@ -161,6 +161,11 @@ class Config:
   # --- Laplace uncertainty (Bayes' Rays style) and masks ---
   use_masks: bool = _f(False, 'masks')
   # Mask uncertain pseudo-view pixels (runs the Hessian pass).
+  mask_signal: str = _f('laplace', 'masks')
+  # The uncertainty the masks threshold: 'laplace' (the Bayes'-Rays-style Hessian pass
+  # below) or a Hessian-free signal of one render: 'one_minus_acc', 'depth_variance',
+  # 'weight_entropy' (renerf_jax/uncertainty_signals.py; experiments/results/uq_tiny.md
+  # compares them).
   deform_log2_res: int = _f(8, 'hessian')
   # L: the deformation grid has (2^L + 1)^3 vertices.
   hessian_rays: int = _f(65536, 'hessian')  # R: training rays in the Hessian pass.
@@ -194,6 +199,10 @@ class Config:
            f'Config.pseudo_schedule={self.pseudo_schedule!r} (early, all or late)')
     _check(self.renerf_init in ('reset', 'continue'),
            f'Config.renerf_init={self.renerf_init!r} (reset or continue)')
+    _check(self.mask_signal in ('laplace', 'one_minus_acc', 'depth_variance',
+                                'weight_entropy'),
+           f'Config.mask_signal={self.mask_signal!r} (laplace, one_minus_acc, '
+           'depth_variance or weight_entropy)')
     _check(self.pseudo_mix in ('pixels', 'fraction'),
            f'Config.pseudo_mix={self.pseudo_mix!r} (pixels or fraction)')
     _check(0. <= self.pseudo_frac <= 1.,

@@ -20,9 +20,11 @@ import jaxopt
 import numpy as np
 
 from renerf_jax import laplace, mip
+from renerf_jax import uncertainty_signals as sig
 from renerf_jax.deformation import trilinear
 from renerf_jax.model import materialize, render_rays
 from renerf_jax.progress import progress_bar
+from renerf_jax.rendering import render_flat
 
 
 # --------------------------------------------------------------- uncertainty
@@ -163,6 +165,30 @@ def masks_from_uncertainty(u, mu):
   return (jnp.asarray(u) <= mu).astype(jnp.float32)
 
 
+# --------------------------------------------------------------- Hessian-free signals
+
+
+@functools.partial(jax.jit, static_argnums=(0,))
+def _signal_chunk(config, params, rays):
+  """Fine-level colour and config.mask_signal (a Hessian-free U) of rays [B]."""
+  fine = render_rays(config, params, rays, jax.random.PRNGKey(0), train=False)[-1]
+  u = {'one_minus_acc': lambda: sig.one_minus_acc(fine['acc']),
+       'depth_variance': lambda: sig.depth_variance(fine['weights'], fine['t_vals']),
+       'weight_entropy': lambda: sig.weight_entropy(fine['weights'])}[config.mask_signal]()
+  return {'u': u, 'rgb': fine['rgb']}
+
+
+def render_signal(config, params, rays, show_progress=False, desc='uncertainty'):
+  """U = config.mask_signal (not 'laplace') and the colour of rays [N], in one render.
+
+  Returns:
+    (u [N], rgb [N, 3]) host numpy arrays.
+  """
+  out = render_flat(config, params, rays, show_progress=show_progress, desc=desc,
+                    chunk_fn=lambda p, r: _signal_chunk(config, p, r))
+  return out['u'], out['rgb']
+
+
 # --------------------------------------------------------------- pseudo-view masks
 
 # The Hessian pass of compute_masks: (config, params, train_rays, lo, hi, chunk,
@@ -192,7 +218,8 @@ def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
                   sigma_fn: Optional[SigmaFn] = None) -> Masks:
   """Uncertainty masks of pseudo-view pixels (the Re-Nerfing + Bayes' Rays step).
 
-  Uses config.deform_log2_res, config.hessian_rays (training rays drawn with
+  U is config.mask_signal: with 'laplace' (the default) it uses
+  config.deform_log2_res, config.hessian_rays (training rays drawn with
   config.seed), config.hessian_lambda, config.mask_threshold (>= 0: absolute mu) or else
   config.mask_keep_frac (mu by bisection), and config.render_chunk. U_bg is the prior
   sigma sqrt(3 / (2 lambda)). The pseudo-view colours come out of the uncertainty render,
@@ -215,17 +242,20 @@ def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
   """
   flat = lambda r: jax.tree_util.tree_map(lambda x: x.reshape((-1, x.shape[-1])), r)
   shape = pseudo_rays.origins.shape[:-1]
-  train = laplace.subsample_rays(flat(train_rays), config.hessian_rays, config.seed)
-  lam = config.hessian_lambda
-  if sigma_fn is None:
-    sigma_fn = _uncached_sigma
-  sigma, hessian_seconds, cached = sigma_fn(
-      config, params, train, lo, hi, hessian_chunk or config.hessian_chunk, show_progress)
-  u, rgb = render_uncertainty(config, params, sigma, flat(pseudo_rays), lo,
-                              hi, chunk=config.render_chunk, u_bg=laplace.prior_sigma(lam),
-                              show_progress=show_progress,
-                              desc=(f'pseudo-views + uncertainty ({shape[0]})'
-                                    if len(shape) == 3 else 'uncertainty'))
+  desc = f'pseudo-views + uncertainty ({shape[0]})' if len(shape) == 3 else 'uncertainty'
+  if config.mask_signal != 'laplace':  # Hessian-free: no Hessian pass at all.
+    u, rgb = render_signal(config, params, flat(pseudo_rays), show_progress, desc)
+    hessian_seconds, cached = 0., False
+  else:
+    train = laplace.subsample_rays(flat(train_rays), config.hessian_rays, config.seed)
+    if sigma_fn is None:
+      sigma_fn = _uncached_sigma
+    sigma, hessian_seconds, cached = sigma_fn(
+        config, params, train, lo, hi, hessian_chunk or config.hessian_chunk, show_progress)
+    u, rgb = render_uncertainty(config, params, sigma, flat(pseudo_rays), lo, hi,
+                                chunk=config.render_chunk,
+                                u_bg=laplace.prior_sigma(config.hessian_lambda),
+                                show_progress=show_progress, desc=desc)
   if config.mask_threshold >= 0:
     mu = float(config.mask_threshold)
   else:

@@ -89,3 +89,31 @@ def test_compute_masks_takes_the_hessian_pass_from_sigma_fn(setup):
   np.testing.assert_array_equal(res.uncertainty, plain.uncertainty)
   np.testing.assert_array_equal(res.mask, plain.mask)
   np.testing.assert_array_equal(res.rgb, plain.rgb)
+
+
+@pytest.mark.parametrize('signal', ['one_minus_acc', 'depth_variance', 'weight_entropy'])
+def test_hessian_free_masks_skip_the_hessian_pass(setup, signal, monkeypatch):
+  config, params, pool = setup
+  config = dataclasses.replace(config, mask_signal=signal, mask_keep_frac=0.7,
+                               render_chunk=64)
+  monkeypatch.setattr(laplace, 'hessian_diagonal',
+                      lambda *a, **k: pytest.fail('Hessian pass with a Hessian-free signal'))
+  pseudo = take(pool['rays'], np.arange(0, 600, 3))
+  res = unc.compute_masks(config, params, pool['rays'], pseudo, -1., 1.,
+                          sigma_fn=lambda *a: pytest.fail('sigma_fn called'))
+  assert res.hessian_seconds == 0. and not res.hessian_cached
+  # U is the signal of one plain render, the colours are that render's.
+  plain = render_flat(config, params, pseudo)
+  np.testing.assert_allclose(res.rgb, plain['rgb'], atol=1e-6)
+  if signal == 'one_minus_acc':
+    np.testing.assert_allclose(res.uncertainty, np.clip(1. - plain['acc'], 0., 1.), atol=1e-6)
+  assert np.all(np.isfinite(res.uncertainty)) and np.all(res.uncertainty >= 0.)
+  assert res.mask.mean() == pytest.approx(0.7, abs=0.05)
+  np.testing.assert_array_equal(res.mask, (res.uncertainty <= res.mu).astype(np.float32))
+
+
+def test_unknown_mask_signal_is_one_config_error():
+  from renerf_jax.configs import load_config  # pylint: disable=g-import-not-at-top
+  from renerf_jax.errors import ConfigError  # pylint: disable=g-import-not-at-top
+  with pytest.raises(ConfigError, match="mask_signal='entropy'"):
+    load_config([], ["Config.mask_signal = 'entropy'"])
