@@ -103,15 +103,16 @@ def markdown(rows, command):
            '| 2x gain SSIM | 2x gain LPIPS | converged |',
            '|---|---|---|---|---|---|---|---|---|---|---|']
   for r in rows:
+    verdict = ('yes' if r['converged'] else 'no') if 'converged' in r else ''
     lines.append(
         f"| {r['scene']} | {r['steps']} | {r['seeds']} | {fmt(r, 'psnr', 2)} | "
         f"{fmt(r, 'ssim')} | {fmt(r, 'lpips_alex')} | {r['round_seconds']:.0f} | "
         f"{fmt(r, 'gain_2x_psnr', 2)} | {fmt(r, 'gain_2x_ssim')} | "
-        f"{fmt(r, 'gain_2x_lpips_alex')} | "
-        f"{'' if 'converged' in r and False else ('yes' if r.get('converged') else ('no' if 'converged' in r else ''))} |")
+        f"{fmt(r, 'gain_2x_lpips_alex')} | {verdict} |")
   return ('\n'.join(lines) + '\n\n"2x gain": metric at 2N steps minus at N, paired by seed '
           f'(mean +- std). Converged: PSNR gain <= {MAX_GAIN["psnr"]} dB and SSIM gain <= '
-          f'{MAX_GAIN["ssim"]}.\n\nCommand:\n\n    {command}\n')
+          f'{MAX_GAIN["ssim"]}. "train s": wall seconds of training as logged (they depend '
+          'on what else shared the CPU).\n\nCommand:\n\n    ' + command + '\n')
 
 
 def plot(rows, scenes, path):
@@ -159,7 +160,8 @@ def main(argv=None):
     bar.update(n)
   bar.close()
   rows = summarize(root, args.scenes, args.seeds, steps)
-  command = 'python ' + shlex.join(sys.argv)
+  # The command that reproduces the table (the runs are reused, or trained when missing).
+  command = 'python ' + shlex.join([a for a in sys.argv if a != '--no-train'])
   report.write_json(os.path.join(args.out, args.name + '.json'),
                     {'name': args.name, 'config': args.config, 'bindings': args.gin_bindings,
                      'rows': rows, 'max_gain': MAX_GAIN, 'command': command})
