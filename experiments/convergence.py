@@ -116,10 +116,7 @@ def markdown(rows, command):
 
 
 def plot(rows, scenes, path):
-  import matplotlib  # pylint: disable=g-import-not-at-top
-  matplotlib.use('Agg')
-  import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
-  fig, axes = plt.subplots(len(METRICS), 2, figsize=(10, 2.6 * len(METRICS)), squeeze=False)
+  fig, axes = report.subplots(len(METRICS), 2, figsize=(10, 2.6 * len(METRICS)))
   for scene in scenes:
     rs = [r for r in rows if r['scene'] == scene]
     if not rs:
@@ -135,8 +132,7 @@ def plot(rows, scenes, path):
   axes[0, 0].legend()
   fig.suptitle('baseline B at N steps (decayed lr): test metrics, mean +- std over seeds')
   fig.tight_layout()
-  fig.savefig(path, dpi=100)
-  plt.close(fig)
+  report.save_figure(fig, path, dpi=100)
 
 
 def main(argv=None):

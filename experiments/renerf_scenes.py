@@ -226,11 +226,9 @@ def markdown(summary, scenes, command):
 
 
 def plot(summary, scenes, path):
-  import matplotlib  # pylint: disable=g-import-not-at-top
-  matplotlib.use('Agg')
-  import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
   labels = [lb for lb in summary['mean']]
-  fig, axes = plt.subplots(1, len(METRICS), figsize=(5 * len(METRICS), 3.6))
+  fig, axes = report.subplots(1, len(METRICS), figsize=(5 * len(METRICS), 3.6))
+  axes = axes[0]
   width = 0.8 / max(len(labels), 1)
   for ax, k in zip(axes, METRICS):
     for i, label in enumerate(labels):
@@ -251,8 +249,7 @@ def plot(summary, scenes, path):
     ax.set_title(f'{k}: D - B (paired by seed)')
   axes[0].legend(fontsize=7)
   fig.tight_layout()
-  fig.savefig(path, dpi=100)
-  plt.close(fig)
+  report.save_figure(fig, path, dpi=100)
 
 
 def main(argv=None):

@@ -234,13 +234,10 @@ def markdown(name, rows, means, best, targets, keep_frac, invocations):
 
 
 def plot_curves(runs, scene, path):
-  import matplotlib  # pylint: disable=g-import-not-at-top
-  matplotlib.use('Agg')
-  import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
   rs = [r for r in runs if r['scene'] == scene]
   kinds = [('', 'RGB squared error')] + (
       [('depth_', '|depth error|')] if 'depth_curve' in rs[0]['variants']['ours'] else [])
-  fig, axes = plt.subplots(1, len(kinds), figsize=(6 * len(kinds), 4.2), squeeze=False)
+  fig, axes = report.subplots(1, len(kinds), figsize=(6 * len(kinds), 4.2))
   x = uq.DEFAULT_FRACTIONS
   for ax, (p, title) in zip(axes[0], kinds):
     for v in us.VARIANTS:
@@ -255,15 +252,11 @@ def plot_curves(runs, scene, path):
     ax.set_title(f'{scene}: {title}, {len(rs)} seed(s); legend: AUSE')
     ax.legend(fontsize=7)
   fig.tight_layout()
-  fig.savefig(path, dpi=100)
-  plt.close(fig)
+  report.save_figure(fig, path, dpi=100)
 
 
 def plot_panel(npz_path, variants, keep_frac, path):
   """Rows: pseudo-view | U | masked view per variant; test view | U | error (first)."""
-  import matplotlib  # pylint: disable=g-import-not-at-top
-  matplotlib.use('Agg')
-  import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
   with np.load(npz_path) as z:
     a = dict(z)
   rgb = np.clip(a['pv_rgb'], 0., 1.)
@@ -278,14 +271,13 @@ def plot_panel(npz_path, variants, keep_frac, path):
                            np.ones(u.shape)))
   rows[-1][:, -u.shape[1]:] = uncertainty_heatmap(a['err'][0])
   titles.append(f'test view (B) | U = {variants[0]} | RGB error (quantiles)')
-  fig, axes = plt.subplots(len(rows), 1, figsize=(9, 2.6 * len(rows)), squeeze=False)
+  fig, axes = report.subplots(len(rows), 1, figsize=(9, 2.6 * len(rows)))
   for ax, img, t in zip(axes[:, 0], rows, titles):
     ax.imshow(np.clip(img, 0., 1.), interpolation='nearest')
     ax.set_title(t, fontsize=9)
     ax.axis('off')
   fig.tight_layout()
-  fig.savefig(path, dpi=100)
-  plt.close(fig)
+  report.save_figure(fig, path, dpi=100)
 
 
 def main(argv=None):

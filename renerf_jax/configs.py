@@ -14,6 +14,7 @@ from typing import Optional, Sequence, Tuple
 import gin
 
 from renerf_jax.errors import ConfigError, USER_ERRORS
+from renerf_jax.report import to_jsonable
 
 
 # What a Config field can change, declared once per field (its `affects` category) and
@@ -257,7 +258,6 @@ def fields_where(effect: str, present: bool = True) -> Tuple[str, ...]:
 def config_differences(config, saved: dict, ignore=()) -> list:
   """Names of the fields outside `ignore` in which `config` and a saved config.json
   differ; a field missing from `saved` (added to Config later) counts as its default."""
-  from renerf_jax.report import to_jsonable  # pylint: disable=g-import-not-at-top
   current = to_jsonable(dataclasses.asdict(config))
   defaults = to_jsonable(dataclasses.asdict(type(config)()))
   saved = dict({k: v for k, v in defaults.items() if k not in saved}, **saved)

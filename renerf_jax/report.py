@@ -252,7 +252,16 @@ def per_image_table(per_image: Sequence[Mapping[str, Any]],
   return rows + [mean_row]
 
 
-def _save_figure(fig, path, dpi=120):
+def subplots(nrows, ncols, figsize):
+  """A matplotlib Figure on an Agg canvas (no pyplot state) and its axes [nrows, ncols]."""
+  from matplotlib.backends.backend_agg import FigureCanvasAgg  # pylint: disable=g-import-not-at-top
+  from matplotlib.figure import Figure  # pylint: disable=g-import-not-at-top
+  fig = Figure(figsize=figsize)
+  FigureCanvasAgg(fig)
+  return fig, fig.subplots(nrows, ncols, squeeze=False)
+
+
+def save_figure(fig, path, dpi=120):
   """Renders a matplotlib Figure with Agg and writes it atomically as PNG."""
   from matplotlib.backends.backend_agg import FigureCanvasAgg  # pylint: disable=g-import-not-at-top
   FigureCanvasAgg(fig)
@@ -301,7 +310,7 @@ def plot_error_vs_time(curves: Mapping[str, Curve],
   ax = fig.add_subplot(1, 1, 1)
   _draw_curves(ax, curves, metric, logx=logx)
   ax.set_title(title or f'{metric.upper()} vs. wall-clock time')
-  _save_figure(fig, path)
+  save_figure(fig, path)
 
 
 def plot_metrics_vs_time(curves_by_metric: Mapping[str, Mapping[str, Curve]],
@@ -325,7 +334,7 @@ def plot_metrics_vs_time(curves_by_metric: Mapping[str, Mapping[str, Curve]],
     ax.set_title(metric.upper())
   if title:
     fig.suptitle(title)
-  _save_figure(fig, path)
+  save_figure(fig, path)
 
 
 def to_uint8(img):

@@ -30,6 +30,20 @@ def blender_dir():
   return str(BLENDER_DIR)
 
 
+def tree_files(directory, digest=False):
+  """{path relative to directory: file bytes (or their SHA-256 with digest=True)}."""
+  import hashlib  # pylint: disable=g-import-not-at-top
+  out = {}
+  for root, _, files in os.walk(directory):
+    for f in files:
+      path = os.path.join(root, f)
+      with open(path, 'rb') as fh:
+        data = fh.read()
+      out[os.path.relpath(path, directory)] = (hashlib.sha256(data).hexdigest() if digest
+                                               else data)
+  return out
+
+
 def tiny_config(**kw):
   """A small, fast Config on the embedded procedural scene."""
   from renerf_jax.configs import Config  # pylint: disable=g-import-not-at-top

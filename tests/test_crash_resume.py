@@ -23,7 +23,6 @@ more than that (another batch of 64 rays: percents), and the final PSNR by about
 as another seed does (0.05-0.1 dB for this config).
 """
 import glob
-import hashlib
 import json
 import os
 import signal
@@ -34,7 +33,7 @@ import time
 import jax
 import numpy as np
 import pytest
-from conftest import REPO
+from conftest import REPO, tree_files
 from flax import serialization
 
 BINDINGS = [
@@ -117,16 +116,6 @@ def _kill_when(proc, condition, timeout=240):
   return False
 
 
-def _hashes(directory):
-  out = {}
-  for root, _, files in os.walk(directory):
-    for f in files:
-      p = os.path.join(root, f)
-      with open(p, 'rb') as fh:
-        out[os.path.relpath(p, directory)] = hashlib.sha256(fh.read()).hexdigest()
-  return out
-
-
 def _temp_files(directory):
   return sorted(os.path.relpath(os.path.join(root, f), directory)
                 for root, _, files in os.walk(directory) for f in files
@@ -171,7 +160,7 @@ def test_sigkill_at_any_moment_then_rerun_matches_uninterrupted_run(tmp_path, st
       _read(tmp_path / 'c.err')[-2000:]
   assert (r0 / 'DONE').exists()
   assert _temp_files(r0) == []  # The resumed round 0 removed the stale temp file.
-  round0 = _hashes(r0)
+  round0 = tree_files(r0, digest=True)
   views_after_c = (run / 'round_1' / 'pseudo_views' / 'views.npz').exists()
 
   # (d) Killed at the rename of round 1's second checkpoint (temp file complete).
@@ -189,7 +178,7 @@ def test_sigkill_at_any_moment_then_rerun_matches_uninterrupted_run(tmp_path, st
   assert res.returncode == 0, res.stderr[-2000:]
 
   # Finished rounds are never rewritten; no temp file is left; checkpoints are pruned.
-  assert _hashes(r0) == round0
+  assert tree_files(r0, digest=True) == round0
   assert _temp_files(run) == []
   for r in (0, 1):
     assert len(os.listdir(run / f'round_{r}' / 'train' / 'checkpoints')) == 2

@@ -8,16 +8,7 @@ from renerf_jax import renerf, resume, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.pseudo_views import pseudo_view_poses, uncertainty_heatmap
 from renerf_jax.errors import ConfigError
-from conftest import tiny_config
-
-
-def _files(directory):
-  out = {}
-  for root, _, files in os.walk(directory):
-    for f in files:
-      p = os.path.join(root, f)
-      out[os.path.relpath(p, directory)] = open(p, 'rb').read()
-  return out
+from conftest import tiny_config, tree_files
 
 
 def test_round_state_is_a_pytree_of_arrays_with_static_bookkeeping():
@@ -98,9 +89,9 @@ def test_rounds_schedule_resume_and_masks(tmp_path):
   third = panel[:, 2 * w + 8:]
   assert np.all(third[state.pseudo.masks[0].reshape(h, w) == 0] == 0)
   # A rerun skips the finished rounds and rewrites nothing.
-  before = _files(run_dir)
+  before = tree_files(run_dir)
   again = resume.run_rounds(config, scene, run_dir, show_progress=False)
-  assert _files(run_dir) == before
+  assert tree_files(run_dir) == before
   assert again.metrics == state.metrics
   jax.tree_util.tree_map(np.testing.assert_array_equal, again.params, state.params)
 

@@ -7,23 +7,13 @@ import jax
 import numpy as np
 import pytest
 
-from conftest import REPO, tiny_config
+from conftest import REPO, tiny_config, tree_files
 from renerf_jax import resume, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.pseudo_views import load_pseudo_views, pseudo_view_poses
 
 sys.path.insert(0, str(REPO / 'experiments'))
 import sharing  # pylint: disable=g-import-not-at-top,g-bad-import-order
-
-
-def _files(directory):
-  out = {}
-  for root, _, files in os.walk(directory):
-    for f in files:
-      p = os.path.join(root, f)
-      with open(p, 'rb') as fh:
-        out[os.path.relpath(p, directory)] = fh.read()
-  return out
 
 
 def test_sharing_rules_derive_from_the_config_field_categories():
@@ -63,10 +53,10 @@ def test_copy_baseline_shares_round_0_between_variants_only(tmp_path):
                         pseudo_targets='test', use_masks=True)
   assert sharing.baseline_differences(variant, {}) != []  # vs defaults: differs
   sharing.copy_baseline(variant, src, dst)
-  before = _files(os.path.join(dst, 'round_0'))
-  assert before == _files(os.path.join(src, 'round_0'))
+  before = tree_files(os.path.join(dst, 'round_0'))
+  assert before == tree_files(os.path.join(src, 'round_0'))
   state = resume.run_rounds(variant, scene, dst, show_progress=False)
-  assert len(state.metrics) == 2 and _files(os.path.join(dst, 'round_0')) == before
+  assert len(state.metrics) == 2 and tree_files(os.path.join(dst, 'round_0')) == before
   assert rundir.is_done(os.path.join(dst, 'round_1'))
   # Another baseline config, an existing destination or an unfinished source: refused.
   with pytest.raises(RunDirError, match='lr_init'):
@@ -89,7 +79,7 @@ def test_copy_baseline_shares_round_0_between_variants_only(tmp_path):
                       pseudo_targets='test', use_masks=True)
   assert sharing.share_pseudo_views(early, dst, dst2)
   assert not sharing.share_pseudo_views(early, dst, dst2)  # already there
-  pv = lambda d: _files(os.path.join(d, 'round_1', 'pseudo_views'))
+  pv = lambda d: tree_files(os.path.join(d, 'round_1', 'pseudo_views'))
   copied = pv(dst2)
   assert 'copied_from.json' in copied
   assert {k: v for k, v in copied.items() if k != 'copied_from.json'} == pv(dst)
@@ -171,15 +161,14 @@ def test_finished_rounds_of_a_run_with_the_same_config_are_copied_not_retrained(
   assert sharing.copy_finished_rounds(more, src, other_b) == []
   assert not os.path.exists(os.path.join(dst, 'round_1'))
   assert sharing.copy_finished_rounds(more, src, dst) == [1]  # round 2 is not in src
-  copied = _files(os.path.join(dst, 'round_1'))
+  copied = tree_files(os.path.join(dst, 'round_1'))
   assert copied.pop('copied_from.json')
-  assert copied == _files(os.path.join(src, 'round_1'))
+  assert copied == tree_files(os.path.join(src, 'round_1'))
   assert sharing.copy_finished_rounds(more, src, dst) == []  # already there
   state = resume.run_rounds(more, scene, dst, show_progress=False)  # trains round 2 only
   assert len(state.metrics) == 3 and rundir.is_done(os.path.join(dst, 'round_2'))
   assert state.metrics[1] == resume.run_rounds(config, scene, src,
                                                show_progress=False).metrics[1]
-
 
 
 def test_hessian_pass_is_shared_only_when_nothing_it_depends_on_differs(monkeypatch):
