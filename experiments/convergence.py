@@ -11,11 +11,11 @@ of PSNR / SSIM / LPIPS and the paired gain of 2N over N (same seed).
 
 Invocations can be split by scene or seed; each writes the table of every finished run
 it finds. The converged-regime config on 2 CPU cores (experiments/configs/
-table_converged.gin), fern and orchids, seed 0 first:
+table_converged.gin), fern, seed 0 (experiments/results/converged8.md):
 
-  python experiments/convergence.py --name converged_curves \
-    --config experiments/configs/table_converged.gin --scenes fern orchids \
-    --seeds 0 --steps 500 1000 2000 4000
+  python experiments/convergence.py --name converged8 \
+    --config experiments/configs/table_converged.gin --scenes fern \
+    --seeds 0 --steps 250 500 1000 2000
 
 Writes <out>/<name>.json, <name>.md and <name>.png (metrics against steps and against
 training seconds, one column per scene, mean +- std over seeds).

@@ -11,15 +11,18 @@ per-scene R1 deltas (RegNeRF base, full scale) stand beside ours.
 
 Runs live in <out>/<name>/<scene>/<row>/seed<k> (resumable; finished runs are reused, so
 invocations can be split by scene, seed and variant, each rewriting the table from every
-finished run it finds). The converged-regime config on 2 CPU cores:
+finished run it finds; --table writes a subset of them to other files). The
+converged-regime config on 2 CPU cores (seed 0 of this was run, split by scene,
+experiments/results/scenes_converged.md):
 
   python experiments/renerf_scenes.py --name scenes_converged \
     --config experiments/configs/table_converged.gin \
     --scenes fern orchids room trex fortress --seeds 0 1 2 --rounds_scenes fern orchids \
     --variant 'R1 + masks=Config.use_masks=True' \
-    --reuse experiments/results/converged_curves
+    --reuse experiments/results/converged8
 
-Writes <out>/<name>.json, <name>.md and <name>.png (paired deltas per scene).
+Writes <out>/<name>.json, <name>.md and <name>.png (paired deltas per scene; --table
+names them otherwise).
 """
 import argparse
 import dataclasses
@@ -74,6 +77,9 @@ def parser():
                       'are copied as B and as B 2x instead of training them again')
   p.add_argument('--gin_bindings', action='append', default=[])
   p.add_argument('--out', default='experiments/results')
+  p.add_argument('--table', default=None,
+                 help='name of the written table files (default --name): tabulate a subset '
+                      'of the runs under <out>/<name> without overwriting the full table')
   return p
 
 
@@ -156,6 +162,9 @@ def summarize(all_rows, scenes, seeds):
       if label != 'B':
         entry['paired'] = pair_stats([(by_seed[s], rows['B'][s]) for s in seeds
                                       if s in by_seed and s in rows['B']])
+      if label not in ('B', 'R1') and 'R1' in rows:  # e.g. masks on/off, R1 vs B 2x
+        entry['paired_R1'] = pair_stats([(by_seed[s], rows['R1'][s]) for s in seeds
+                                         if s in by_seed and s in rows['R1']])
       res[label] = entry
     res['paper_R1_delta'] = paper_delta(sc)
     out['scenes'][sc] = res
@@ -168,7 +177,11 @@ def summarize(all_rows, scenes, seeds):
     per_scene = {k: [out['scenes'][sc][label]['paired'][k][0] for sc in scenes
                      if label in out['scenes'][sc] and k in out['scenes'][sc][label]['paired']]
                  for k in METRICS}
+    pairs_r1 = [(all_rows[sc][label][s], all_rows[sc]['R1'][s]) for sc in scenes
+                if label in all_rows[sc] and 'R1' in all_rows[sc] for s in seeds
+                if s in all_rows[sc][label] and s in all_rows[sc]['R1']]
     out['mean'][label] = {'pooled': pair_stats(pairs),
+                          'pooled_R1': pair_stats(pairs_r1) if label != 'R1' else {},
                           'mean_of_scene_means': {k: tables.mean_std(v)
                                                   for k, v in per_scene.items() if v},
                           'scenes': sum(label in all_rows[sc] for sc in scenes)}
@@ -192,35 +205,42 @@ def markdown(summary, scenes, command):
     pd = res['paper_R1_delta']
     lines += [f'### {sc}', '',
               '| row | PSNR | SSIM | LPIPS-alex | cum. s | dPSNR (wins) | dSSIM (wins) '
-              '| dLPIPS (wins) |', '|---|---|---|---|---|---|---|---|']
+              '| dLPIPS (wins) | row - R1: dPSNR | dSSIM | dLPIPS |',
+              '|---|---|---|---|---|---|---|---|---|---|---|']
     for label, e in res.items():
       if label == 'paper_R1_delta':
         continue
       cell = lambda k, d: f'{e[k][0]:.{d}f} +- {e[k][1]:.{d}f}' if k in e else ''
-      p = e.get('paired', {})
+      p, q = e.get('paired', {}), e.get('paired_R1', {})
       lines.append(f"| {label} | {cell('psnr', 2)} | {cell('ssim', 3)} | "
                    f"{cell('lpips_alex', 3)} | {e['seconds'][0]:.0f} | "
                    f"{fmt_pair(p, 'psnr')} | {fmt_pair(p, 'ssim', 3)} | "
-                   f"{fmt_pair(p, 'lpips_alex', 3)} |")
+                   f"{fmt_pair(p, 'lpips_alex', 3)} | {fmt_pair(q, 'psnr')} | "
+                   f"{fmt_pair(q, 'ssim', 3)} | {fmt_pair(q, 'lpips_alex', 3)} |")
     if pd:
       lines.append(f"| paper R1 - RegNeRF | | | | | {pd['psnr']:+.2f} | {pd['ssim']:+.3f} | "
-                   f"{pd['lpips_alex']:+.3f} |")
+                   f"{pd['lpips_alex']:+.3f} | | | |")
     lines.append('')
   lines += ['### Over scenes (paired D - B)', '',
             '| row | scenes | pooled dPSNR (wins) | pooled dSSIM (wins) | pooled dLPIPS (wins) '
-            '| mean of scene means dPSNR |', '|---|---|---|---|---|---|']
+            '| mean of scene means dPSNR | row - R1: dPSNR (wins) | dSSIM | dLPIPS |',
+            '|---|---|---|---|---|---|---|---|---|']
   for label, e in summary['mean'].items():
-    p, m = e['pooled'], e['mean_of_scene_means']
+    p, m, q = e['pooled'], e['mean_of_scene_means'], e.get('pooled_R1', {})
     mp = f"{m['psnr'][0]:+.2f} +- {m['psnr'][1]:.2f}" if 'psnr' in m else ''
     lines.append(f"| {label} | {e['scenes']} | {fmt_pair(p, 'psnr')} | "
-                 f"{fmt_pair(p, 'ssim', 3)} | {fmt_pair(p, 'lpips_alex', 3)} | {mp} |")
+                 f"{fmt_pair(p, 'ssim', 3)} | {fmt_pair(p, 'lpips_alex', 3)} | {mp} | "
+                 f"{fmt_pair(q, 'psnr')} | {fmt_pair(q, 'ssim', 3)} | "
+                 f"{fmt_pair(q, 'lpips_alex', 3)} |")
   if summary['paper_R1_delta_mean']:
     pm = summary['paper_R1_delta_mean']
     lines.append(f"| paper R1 (these scenes) | | {pm['psnr']:+.2f} | {pm['ssim']:+.3f} | "
-                 f"{pm['lpips_alex']:+.3f} | |")
+                 f"{pm['lpips_alex']:+.3f} | | | | |")
   lines += ['', 'dX: D minus B of the same (scene, seed), mean +- std over pairs; (wins/n): '
-            'pairs where D beats B (higher PSNR / SSIM, lower LPIPS). Two identical runs differ '
-            'by 0.2-0.5 dB, so a mean delta inside its std is no gain.', '',
+            'pairs where D beats B (higher PSNR / SSIM, lower LPIPS). "row - R1": the row '
+            'minus R1 of the same (scene, seed), wins where the row beats R1 (R1 + masks '
+            'against R1 without; B 2x steps against R1 at about equal time). Two identical '
+            'runs differ by 0.2-0.5 dB, so a mean delta inside its std is no gain.', '',
             'Command:', '', f'    {command}', '']
   return '\n'.join(lines)
 
@@ -259,12 +279,13 @@ def main(argv=None):
   all_rows = {sc: scene_runs(args, sc, bindings) for sc in args.scenes}
   summary = summarize(all_rows, args.scenes, args.seeds)
   command = 'python ' + shlex.join(sys.argv)
-  report.write_json(os.path.join(args.out, args.name + '.json'),
+  table = args.table or args.name
+  report.write_json(os.path.join(args.out, table + '.json'),
                     {'name': args.name, 'config': args.config, 'seeds': args.seeds,
                      'rows': all_rows, 'summary': summary, 'command': command})
   text = markdown(summary, args.scenes, command)
-  report.write_markdown(os.path.join(args.out, args.name + '.md'), text)
-  plot(summary, args.scenes, os.path.join(args.out, args.name + '.png'))
+  report.write_markdown(os.path.join(args.out, table + '.md'), text)
+  plot(summary, args.scenes, os.path.join(args.out, table + '.png'))
   print(text)
 
 

@@ -52,7 +52,7 @@ import tables  # pylint: disable=g-import-not-at-top
 
 VARIANTS = ["augmented views=Config.pseudo_schedule='all'",
             'stop aug. views=',
-            '+ masks=Config.use_masks=True']
+            "+ masks=Config.use_masks=True;Config.mask_signal='laplace'"]
 
 
 def main():

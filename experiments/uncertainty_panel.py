@@ -35,7 +35,7 @@ def main(argv=None):
   p.add_argument('--work_dir', required=True, help='pseudo-views with masks go here')
   p.add_argument('--out', required=True, help='output prefix (.png, .json)')
   args = p.parse_args(argv)
-  config = dataclasses.replace(run_config(args), use_masks=True)
+  config = dataclasses.replace(run_config(args), use_masks=True, mask_signal='laplace')
   if os.path.abspath(args.work_dir).startswith(os.path.abspath(args.run_dir) + os.sep):
     raise SystemExit(f'error: --work_dir {args.work_dir} lies inside --run_dir; '
                      'a finished run is never written to')

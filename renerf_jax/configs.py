@@ -161,12 +161,12 @@ class Config:
   # Random unobserved poses for pseudo_targets 'random'.
   # --- Laplace uncertainty (Bayes' Rays style) and masks ---
   use_masks: bool = _f(False, 'masks')
-  # Mask uncertain pseudo-view pixels (runs the Hessian pass).
-  mask_signal: str = _f('laplace', 'masks')
-  # The uncertainty the masks threshold: 'laplace' (the Bayes'-Rays-style Hessian pass
-  # below) or a Hessian-free signal of one render: 'one_minus_acc', 'depth_variance',
-  # 'weight_entropy' (renerf_jax/uncertainty_signals.py; experiments/results/uq_tiny.md
-  # compares them).
+  # Mask uncertain pseudo-view pixels (with mask_signal 'laplace': after the Hessian pass).
+  mask_signal: str = _f('one_minus_acc', 'masks')
+  # The uncertainty the masks threshold: a Hessian-free signal of one render,
+  # 'one_minus_acc' (the default: the lowest mean AUSE over six scenes),
+  # 'depth_variance', 'weight_entropy' (renerf_jax/uncertainty_signals.py), or 'laplace'
+  # (the Bayes'-Rays-style Hessian pass below). experiments/results/uq_tiny.md compares them.
   deform_log2_res: int = _f(8, 'hessian')
   # L: the deformation grid has (2^L + 1)^3 vertices.
   hessian_rays: int = _f(65536, 'hessian')  # R: training rays in the Hessian pass.

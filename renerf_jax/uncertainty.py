@@ -218,7 +218,8 @@ def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
                   sigma_fn: Optional[SigmaFn] = None) -> Masks:
   """Uncertainty masks of pseudo-view pixels (the Re-Nerfing + Bayes' Rays step).
 
-  U is config.mask_signal: with 'laplace' (the default) it uses
+  U is config.mask_signal: a Hessian-free signal of one render (the default
+  'one_minus_acc'), or with 'laplace' the Laplace approximation, which uses
   config.deform_log2_res, config.hessian_rays (training rays drawn with
   config.seed), config.hessian_lambda, config.mask_threshold (>= 0: absolute mu) or else
   config.mask_keep_frac (mu by bisection), and config.render_chunk. U_bg is the prior

@@ -53,7 +53,7 @@ def tiny_config(**kw):
               depth_tv_maxstep=5, anneal_nearfar_steps=5, n_random_poses=50,
               batch_size_random=64, patch_size=4, print_every=10, eval_every=10,
               checkpoint_every=10, render_chunk=512, pseudo_until_frac=0.5,
-              lpips_nets=('alex',))
+              lpips_nets=('alex',), mask_signal='laplace')  # masks in tests: the Laplace path
   base.update(kw)
   return Config(**base)
 

@@ -168,12 +168,12 @@ OLD_TO_NEW = {
                                dict(field='grid', max_steps=400, batch_size=1024,
                                     image_downsample=2, anneal_nearfar=True, num_rounds=3,
                                     pseudo_until_frac=0.5, pseudo_mix='fraction', hessian_rays=16384, eval_stride=4,
-                                    lpips_nets=('alex',))),
+                                    lpips_nets=('alex',), mask_signal='laplace')),
     'llff3_tiny_renerf.gin': ((os.path.join(TABLES, 'table_tiny.gin'),),
                               dict(field='grid', max_steps=400, batch_size=512,
                                    image_downsample=4, anneal_nearfar=True, num_rounds=3,
                                    pseudo_until_frac=0.5, pseudo_mix='fraction', hessian_rays=8192, eval_stride=2,
-                                   lpips_nets=('alex',))),
+                                   lpips_nets=('alex',), mask_signal='laplace')),
 }
 # What every old *_renerf.gin set: the method's settings (Config's defaults) and 3 rounds.
 RENERF = dict(num_rounds=3, interp_factors='7x', sequencing='position', pseudo_frac=0.5,
@@ -230,7 +230,7 @@ def test_small_table_config_is_the_fast_one_smaller():
   assert small.anneal_nearfar and not fast.anneal_nearfar
   sizes = ('anneal_nearfar', 'image_downsample', 'batch_size', 'batch_size_random', 'max_steps',
            'anneal_nearfar_steps', 'lr_delay_steps', 'depth_tv_maxstep', 'pseudo_until_frac',
-           'pseudo_mix',
+           'pseudo_mix', 'mask_signal',
            'eval_every', 'eval_stride', 'checkpoint_every', 'hessian_rays', 'lpips_nets')
   assert dataclasses.replace(small, **{k: getattr(fast, k) for k in sizes}) == fast
 

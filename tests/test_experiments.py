@@ -7,7 +7,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from conftest import REPO
+from conftest import REPO, tree_files
 
 TINY = ['Config.procedural_size = (32, 40)', 'Config.max_steps = 12',
         'Config.batch_size = 64', 'Config.num_samples = 8', 'Config.net_depth = 2',
@@ -162,5 +162,18 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   assert paired['psnr'][0] == pytest.approx(np.mean(deltas))
   assert paired['psnr'][2] == sum(d > 0 for d in deltas) and paired['psnr'][3] == 2
   assert result['summary']['mean']['B 2x steps']['pooled']['psnr'][3] == 2
+  # Rows other than B and R1 are also paired with R1 (masks on vs off, 2x vs R1).
+  vs_r1 = result['summary']['scenes']['procedural']['R1 + masks']['paired_R1']
+  assert vs_r1['psnr'][0] == pytest.approx(np.mean(
+      [rows['R1 + masks'][str(s)]['psnr'] - rows['R1'][str(s)]['psnr'] for s in (0, 1)]))
+  assert 'paired_R1' not in result['summary']['scenes']['procedural']['R1']
   md = (out / 's.md').read_text()
   assert 'B 2x steps' in md and 'wins' in md and (out / 's.png').stat().st_size > 0
+  # --table: a subset of the same runs (reused, nothing trained) into other files.
+  before = tree_files(out / 's')
+  sub = subprocess.run(cmd + ['--table', 't', '--seeds', '0'], cwd=REPO, capture_output=True,
+                       text=True, timeout=600, check=False)
+  assert sub.returncode == 0, sub.stderr[-3000:]
+  assert tree_files(out / 's') == before and (out / 's.md').read_text() == md
+  sub_rows = json.loads((out / 't.json').read_text())['rows']['procedural']
+  assert sub_rows['R1'] == {'0': rows['R1']['0']}

@@ -9,7 +9,8 @@ from renerf_jax.fields import init_field_params
 LAM = 1e-4
 TINY = Config(dataset_loader='procedural', num_samples=8, net_depth=2, net_width=32,
               net_width_viewdirs=16, max_deg_point=4, deg_view=2, density_noise=0.,
-              randomized=False, procedural_size=(12, 16), procedural_views=9)
+              randomized=False, procedural_size=(12, 16), procedural_views=9,
+              mask_signal='laplace')  # these tests are about the Laplace path
 
 
 def tiny_setup():

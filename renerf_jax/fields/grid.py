@@ -317,7 +317,18 @@ class GridField(nn.Module):
     Returns:
       (raw_rgb [..., S, 3], raw_density [..., S]).
     """
-    feats = self.encode(means, covs, feature_mask)
+    return self.decode(self.encode(means, covs, feature_mask), viewdirs)
+
+  def decode(self, feats, viewdirs):
+    """The tiny MLPs: grid features -> raw outputs.
+
+    Args:
+      feats: [..., S, L * F] grid features (encode).
+      viewdirs: [..., 3] unit viewing directions.
+
+    Returns:
+      (raw_rgb [..., S, 3], raw_density [..., S]).
+    """
     h = self.density_out(nn.relu(self.density_hidden(feats)))
     raw_density, geo = h[..., 0], h[..., 1:]
     x = self.color_geo(geo)
