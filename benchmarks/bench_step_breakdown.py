@@ -26,40 +26,24 @@ and markdown to benchmarks/results/ (or --out).
 import argparse
 import os
 import sys
-import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from renerf_jax import mip, report, training  # pylint: disable=g-import-not-at-top
+from bench_throughput import time_calls, xla_cost  # pylint: disable=g-import-not-at-top
+from renerf_jax import mip, regularizers, report, training  # pylint: disable=g-import-not-at-top
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.fields import make_field
 from renerf_jax.renerf import make_pools
 
 
-def _cost(compiled):
-  """(GFLOP, GB accessed) of a compiled executable (NaN where XLA does not say)."""
-  cost = compiled.cost_analysis()
-  if isinstance(cost, (list, tuple)):
-    cost = cost[0] if cost else {}
-  return (float(cost.get('flops', np.nan)) / 1e9,
-          float(cost.get('bytes accessed', np.nan)) / 1e9)
-
-
 def _time(fn, args, repeats):
-  """Compile fn(*args), time it; returns (median seconds, GFLOP, GB)."""
+  """Compile fn(*args) and time it; returns (median seconds, GFLOP, GB accessed)."""
   compiled = jax.jit(fn).lower(*args).compile()
-  gflop, gb = _cost(compiled)
-  jax.block_until_ready(compiled(*args))
-  times = []
-  for _ in range(repeats):
-    t = time.perf_counter()
-    jax.block_until_ready(compiled(*args))
-    times.append(time.perf_counter() - t)
-  return float(np.median(times)), gflop, gb
+  return (time_calls(lambda: compiled(*args), repeats),) + xla_cost(compiled)
 
 
 def parts(config, repeats):
@@ -74,6 +58,7 @@ def parts(config, repeats):
   n_patches = max(config.batch_size_random // config.patch_size**2, 1)
   patches = training.random_patch_rays(pools['random_poses'], k_patch, n_patches,
                                        config.patch_size, cam)
+  flat = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[3:]), patches)
   step = jnp.float32(config.max_steps // 2)
   rows = []
 
@@ -90,17 +75,14 @@ def parts(config, repeats):
       batch, k_render)
 
   def patch_loss(p, k):
-    flat = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[3:]), patches)
     levels = training.render_rays(config, p, flat, k, train=True)
-    depth = levels[-1]['distance'].reshape(patches.origins.shape[:3])
-    return jnp.mean(jnp.abs(depth[:, 1:] - depth[:, :-1]))
+    return regularizers.depth_tv(levels[-1]['distance'].reshape(patches.origins.shape[:3]))
   add('patch+grad', jax.value_and_grad(patch_loss), state.params, k_render)
 
   if config.field == 'grid':
     field = make_field(config)
     # The samples of a step: the coarse samples of its batch and patch rays, once per level
     # (the fine samples lie on the same rays), so that the gather sees ray-coherent points.
-    flat = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[3:]), patches)
     rays = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), batch['rays'], flat)
     _, (means, covs) = mip.sample_along_rays(
         key, rays.origins, rays.directions, rays.radii, config.num_samples, rays.near,

@@ -38,7 +38,7 @@ from renerf_jax.rendering import _render_chunk
 from renerf_jax.renerf import make_pools
 
 
-def _time_calls(fn, repeats, warmups=1):
+def time_calls(fn, repeats, warmups=1):
   """Median seconds of `repeats` calls of fn() after `warmups` calls (the second call of
   a step that donates its state can compile again for the returned arrays' layout)."""
   for _ in range(warmups):
@@ -51,14 +51,20 @@ def _time_calls(fn, repeats, warmups=1):
   return float(np.median(times))
 
 
+def xla_cost(compiled):
+  """(GFLOP, GB accessed) of one call of a compiled executable (NaN where XLA does not say)."""
+  cost = compiled.cost_analysis()
+  cost = (cost[0] if cost else {}) if isinstance(cost, (list, tuple)) else cost
+  return (float(cost.get('flops', float('nan'))) / 1e9,
+          float(cost.get('bytes accessed', float('nan'))) / 1e9)
+
+
 def _compile(jitted, *args):
   """(compile seconds, GFLOP of one call) of a jitted function at these arguments."""
   t = time.perf_counter()
   compiled = jitted.lower(*args).compile()
   seconds = time.perf_counter() - t
-  cost = compiled.cost_analysis()
-  cost = cost[0] if isinstance(cost, (list, tuple)) else cost
-  return seconds, float(cost.get('flops', float('nan'))) / 1e9
+  return seconds, xla_cost(compiled)[0]
 
 
 def _row(config, stage, rays, sec, gflop, compile_s):
@@ -84,7 +90,7 @@ def bench_train(config, scene, repeats, at_fraction=0.):
     holder[0], stats = training.train_step(config, cam, False, holder[0], pools, key)
     return stats
 
-  sec = _time_calls(step, repeats, warmups=2)
+  sec = time_calls(step, repeats, warmups=2)
   rays = config.batch_size + (config.batch_size_random if config.depth_tv_loss_mult > 0
                               else 0)
   return _row(config, 'train', rays, sec, gflop, compile_s)
@@ -94,7 +100,7 @@ def bench_render(config, rays, params, repeats):
   n = config.render_chunk
   part = jax.tree_util.tree_map(lambda x: x[:n], rays)
   compile_s, gflop = _compile(_render_chunk, config, params, part)
-  sec = _time_calls(lambda: _render_chunk(config, params, part), repeats)
+  sec = time_calls(lambda: _render_chunk(config, params, part), repeats)
   return _row(config, 'render', n, sec, gflop, compile_s)
 
 
@@ -108,7 +114,7 @@ def bench_hessian(config, scene, rays, params, chunk, repeats):
   args = lambda: (cfg, log2_res, params, part, valid, lo, hi, zeros(), zeros())
   # pylint: disable=protected-access
   compile_s, gflop = _compile(laplace._hessian_chunk, *args())
-  sec = _time_calls(lambda: laplace._hessian_chunk(*args()), repeats)
+  sec = time_calls(lambda: laplace._hessian_chunk(*args()), repeats)
   row = _row(config, 'hessian', chunk, sec, gflop, compile_s)
   row['samples'] += f', grid 2^{log2_res}+1'
   return row

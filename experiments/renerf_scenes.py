@@ -144,6 +144,13 @@ def scene_runs(args, scene_name, base_bindings):
   return rows
 
 
+def pairs_of(all_rows, scenes, seeds, label, ref):
+  """[(metrics of row `label`, metrics of row `ref`)] of the same (scene, seed)."""
+  return [(all_rows[sc][label][s], all_rows[sc][ref][s]) for sc in scenes
+          if label in all_rows[sc] and ref in all_rows[sc] for s in seeds
+          if s in all_rows[sc][label] and s in all_rows[sc][ref]]
+
+
 def summarize(all_rows, scenes, seeds):
   """Per scene and over scenes: mean +- std of each row and paired deltas vs B."""
   out = {'scenes': {}, 'mean': {}}
@@ -160,28 +167,22 @@ def summarize(all_rows, scenes, seeds):
                if all(k in m for m in by_seed.values())}
       entry['seconds'] = tables.mean_std([m['cumulative_seconds'] for m in by_seed.values()])
       if label != 'B':
-        entry['paired'] = pair_stats([(by_seed[s], rows['B'][s]) for s in seeds
-                                      if s in by_seed and s in rows['B']])
+        entry['paired'] = pair_stats(pairs_of(all_rows, [sc], seeds, label, 'B'))
       if label not in ('B', 'R1') and 'R1' in rows:  # e.g. masks on/off, R1 vs B 2x
-        entry['paired_R1'] = pair_stats([(by_seed[s], rows['R1'][s]) for s in seeds
-                                         if s in by_seed and s in rows['R1']])
+        entry['paired_R1'] = pair_stats(pairs_of(all_rows, [sc], seeds, label, 'R1'))
       res[label] = entry
     res['paper_R1_delta'] = paper_delta(sc)
     out['scenes'][sc] = res
   for label in labels:
     if label == 'B':
       continue
-    pairs = [(all_rows[sc][label][s], all_rows[sc]['B'][s]) for sc in scenes
-             if label in all_rows[sc] for s in seeds if s in all_rows[sc][label]]
     # The mean over scenes of each scene's mean delta, and the pooled pair counts.
     per_scene = {k: [out['scenes'][sc][label]['paired'][k][0] for sc in scenes
                      if label in out['scenes'][sc] and k in out['scenes'][sc][label]['paired']]
                  for k in METRICS}
-    pairs_r1 = [(all_rows[sc][label][s], all_rows[sc]['R1'][s]) for sc in scenes
-                if label in all_rows[sc] and 'R1' in all_rows[sc] for s in seeds
-                if s in all_rows[sc][label] and s in all_rows[sc]['R1']]
-    out['mean'][label] = {'pooled': pair_stats(pairs),
-                          'pooled_R1': pair_stats(pairs_r1) if label != 'R1' else {},
+    out['mean'][label] = {'pooled': pair_stats(pairs_of(all_rows, scenes, seeds, label, 'B')),
+                          'pooled_R1': (pair_stats(pairs_of(all_rows, scenes, seeds, label,
+                                                            'R1')) if label != 'R1' else {}),
                           'mean_of_scene_means': {k: tables.mean_std(v)
                                                   for k, v in per_scene.items() if v},
                           'scenes': sum(label in all_rows[sc] for sc in scenes)}
@@ -196,6 +197,11 @@ def fmt_pair(p, k, d=2):
     return ''
   mean, std, wins, n = p[k]
   return f'{mean:+.{d}f} +- {std:.{d}f} ({wins}/{n})'
+
+
+def fmt_triple(p):
+  """'dPSNR | dSSIM | dLPIPS' cells of pair_stats output."""
+  return f"{fmt_pair(p, 'psnr')} | {fmt_pair(p, 'ssim', 3)} | {fmt_pair(p, 'lpips_alex', 3)}"
 
 
 def markdown(summary, scenes, command):
@@ -214,9 +220,7 @@ def markdown(summary, scenes, command):
       p, q = e.get('paired', {}), e.get('paired_R1', {})
       lines.append(f"| {label} | {cell('psnr', 2)} | {cell('ssim', 3)} | "
                    f"{cell('lpips_alex', 3)} | {e['seconds'][0]:.0f} | "
-                   f"{fmt_pair(p, 'psnr')} | {fmt_pair(p, 'ssim', 3)} | "
-                   f"{fmt_pair(p, 'lpips_alex', 3)} | {fmt_pair(q, 'psnr')} | "
-                   f"{fmt_pair(q, 'ssim', 3)} | {fmt_pair(q, 'lpips_alex', 3)} |")
+                   f"{fmt_triple(p)} | {fmt_triple(q)} |")
     if pd:
       lines.append(f"| paper R1 - RegNeRF | | | | | {pd['psnr']:+.2f} | {pd['ssim']:+.3f} | "
                    f"{pd['lpips_alex']:+.3f} | | | |")
@@ -228,10 +232,7 @@ def markdown(summary, scenes, command):
   for label, e in summary['mean'].items():
     p, m, q = e['pooled'], e['mean_of_scene_means'], e.get('pooled_R1', {})
     mp = f"{m['psnr'][0]:+.2f} +- {m['psnr'][1]:.2f}" if 'psnr' in m else ''
-    lines.append(f"| {label} | {e['scenes']} | {fmt_pair(p, 'psnr')} | "
-                 f"{fmt_pair(p, 'ssim', 3)} | {fmt_pair(p, 'lpips_alex', 3)} | {mp} | "
-                 f"{fmt_pair(q, 'psnr')} | {fmt_pair(q, 'ssim', 3)} | "
-                 f"{fmt_pair(q, 'lpips_alex', 3)} |")
+    lines.append(f"| {label} | {e['scenes']} | {fmt_triple(p)} | {mp} | {fmt_triple(q)} |")
   if summary['paper_R1_delta_mean']:
     pm = summary['paper_R1_delta_mean']
     lines.append(f"| paper R1 (these scenes) | | {pm['psnr']:+.2f} | {pm['ssim']:+.3f} | "
