@@ -25,6 +25,7 @@ and markdown to benchmarks/results/ (or --out).
 """
 import argparse
 import os
+import shlex
 import sys
 
 import jax
@@ -145,7 +146,7 @@ def main(argv=None):
           'seconds': '.4f', 'share_of_step': '.0%', 'gflop': '.2f', 'gb': '.3f',
           'flop_per_byte': '.2f', 'gflop_per_s': '.1f', 'gb_per_s': '.1f',
           'step_vs_first': '.2f'})
-  command = 'python ' + ' '.join(sys.argv)
+  command = 'python ' + shlex.join(sys.argv)
   text = (f'{table}\n\nParts overlap (render+grad contains encode and mlps); "of step" is '
           f'each part\'s time over the whole step\'s. Device: {jax.devices()[0]}, '
           f'{os.cpu_count()} CPUs.\n\nCommand:\n\n    {command}\n')

@@ -14,12 +14,14 @@ For each config and stage, on the configured scene with freshly initialised para
            w.r.t. the (2^L + 1)^3 deformation grid (L = Config.deform_log2_res).
 Seconds per call are the median of --repeats calls after warm-up calls; GFLOP per call is
 XLA's cost analysis of the compiled function; efficiency = achieved GFLOP/s / the measured
-float32 matmul GFLOP/s of this CPU. Writes JSON and a markdown table (--out). Run it on an
+float32 matmul GFLOP/s of this CPU; the speed-up of a stage is its rays/s over the first
+config's in the same run. Writes JSON and a markdown table (--out). Run it on an
 idle machine: a second job on the 2 cores halves every rate.
 """
 import argparse
 import dataclasses
 import os
+import shlex
 import sys
 import time
 
@@ -142,6 +144,15 @@ def bench_config(path, bindings, repeats, hessian_chunk, stages, train_at=0.):
   return rows
 
 
+def add_speedups(rows):
+  """Sets row['speedup']: its rays/s over the first config's rays/s in the same stage
+  (both measured in this run, so the ratio holds while absolute rates drift with load)."""
+  first = {}
+  for row in rows:
+    first.setdefault(row['stage'], row['rays_per_s'])
+    row['speedup'] = row['rays_per_s'] / first[row['stage']]
+
+
 def write_table(rows, roof, out, command):
   """Markdown table of the rows next to the matmul roof; returns its text."""
   table = report.markdown_table(rows, [
@@ -149,8 +160,9 @@ def write_table(rows, roof, out, command):
       ('stage', 'stage'), ('rays', 'rays/call'), ('sec_per_call', 's/call'),
       ('rays_per_s', 'rays/s'), ('samples_per_s', 'samples/s'),
       ('gflop_per_call', 'GFLOP/call'), ('achieved_gflops', 'GFLOP/s'),
-      ('flop_efficiency', 'of matmul roof'), ('compile_s', 'compile s')], floatfmt={
-          'sec_per_call': '.3f', 'rays_per_s': '.0f', 'samples_per_s': '.0f',
+      ('flop_efficiency', 'of matmul roof'), ('speedup', 'rays/s vs first config'),
+      ('compile_s', 'compile s')], floatfmt={
+          'sec_per_call': '.3f', 'speedup': '.2f', 'rays_per_s': '.0f', 'samples_per_s': '.0f',
           'gflop_per_call': '.1f', 'achieved_gflops': '.1f', 'flop_efficiency': '.1%',
           'compile_s': '.1f'})
   text = (f'Matmul roof (float32 2048^2, best of 5): {roof:.1f} GFLOP/s\n\n{table}\n\n'
@@ -178,9 +190,10 @@ def main(argv=None):
   for path in args.configs:
     rows += bench_config(path, args.gin_bindings, args.repeats, args.hessian_chunk,
                          args.stages, args.train_at)
+  add_speedups(rows)
   for row in rows:
     row['flop_efficiency'] = row['achieved_gflops'] / roof
-  command = 'python ' + ' '.join(sys.argv)
+  command = 'python ' + shlex.join(sys.argv)
   os.makedirs(os.path.dirname(args.out) or '.', exist_ok=True)
   report.write_json(args.out + '.json', {'matmul_gflops': roof,
                                          'device': str(jax.devices()[0]),

@@ -12,14 +12,17 @@ per-scene R1 deltas (RegNeRF base, full scale) stand beside ours.
 Runs live in <out>/<name>/<scene>/<row>/seed<k> (resumable; finished runs are reused, so
 invocations can be split by scene, seed and variant, each rewriting the table from every
 finished run it finds; --table writes a subset of them to other files). The
-converged-regime config on 2 CPU cores (seed 0 of this was run, split by scene,
-experiments/results/scenes_converged.md):
+converged-regime table on 2 CPU cores (five scenes x 3 seeds, run split by scene;
+experiments/results/scenes_conv2.md), and its masks and attribution rows on seed 0:
 
-  python experiments/renerf_scenes.py --name scenes_converged \
-    --config experiments/configs/table_converged.gin \
-    --scenes fern orchids room trex fortress --seeds 0 1 2 --rounds_scenes fern orchids \
-    --variant 'R1 + masks=Config.use_masks=True' \
-    --reuse experiments/results/converged8
+  python experiments/renerf_scenes.py --name scenes_conv2 \
+    --config experiments/configs/table_converged2.gin \
+    --scenes fern orchids room trex fortress --seeds 0 1 2 \
+    --reuse experiments/results/conv2
+  python experiments/renerf_scenes.py --name scenes_conv2 --table scenes_conv2_attribution \
+    --config experiments/configs/table_converged2.gin --scenes fern trex --seeds 0 --no_2x \
+    --variant 'K 0.12=Config.pseudo_until_frac = 0.12' ... \
+    --variant 'R1 + masks=Config.use_masks = True'
 
 Writes <out>/<name>.json, <name>.md and <name>.png (paired deltas per scene; --table
 names them otherwise).

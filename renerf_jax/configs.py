@@ -64,6 +64,14 @@ class Config:
   use_ndc: bool = True  # NDC space for forward-facing scenes; never for 360 scenes.
   near: float = 0.  # Near plane (NDC: 0).
   far: float = 1.  # Far plane (NDC: 1).
+  # (scene, near) pairs: that LLFF scene's per-image near bounds are raised to at least
+  # `near` (poses_bounds.npy units) before RegNeRF's scaling by 1 / (0.75 min near).
+  # Corrects a capture whose bounds came from spurious near points (the loader warns when
+  # bounds look like that); gin_configs/modifiers/shared_bounds.gin has the values measured
+  # for ../shared/data's re-processed room and trex. Off: (). Only the pair of
+  # Config.scene is kept (so a run of another scene has the same Config with or without
+  # the modifier, and its run directory stays reusable).
+  llff_min_near: Tuple[Tuple[str, float], ...] = ()
   procedural_size: Tuple[int, int] = (48, 64)  # (H, W) of the embedded scene.
   procedural_views: int = 17  # Number of images the embedded scene renders.
   # --- optimisation ---
@@ -189,6 +197,13 @@ class Config:
   lpips_nets: Tuple[str, ...] = _f(('alex', 'vgg'), 'report')
 
   def __post_init__(self):
+    _check(all(len(p) == 2 and isinstance(p[0], str) and isinstance(p[1], (int, float))
+               and p[1] > 0
+               for p in self.llff_min_near),
+           f'Config.llff_min_near={self.llff_min_near!r} must be (scene name, near > 0) '
+           'pairs')
+    object.__setattr__(self, 'llff_min_near', tuple(
+        (name, float(near)) for name, near in self.llff_min_near if name == self.scene))
     _check(self.dataset_loader in ('llff', 'blender', 'procedural'),
            f'Config.dataset_loader={self.dataset_loader!r} (llff, blender or procedural)')
     _check(self.ray_shape in ('cone', 'cylinder'),

@@ -8,7 +8,8 @@ import pytest
 
 from renerf_jax.configs import Config
 from renerf_jax.datasets import camera_rays, downsample_scene, fewshot_split, load_scene
-from renerf_jax.errors import DataError
+from renerf_jax.datasets.llff import bounds_warning, raise_near_bounds
+from renerf_jax.errors import ConfigError, DataError
 from conftest import LLFF_DIR
 
 
@@ -196,3 +197,43 @@ def test_blender_frame_with_missing_file(tmp_path, blender_dir):
   with pytest.raises(DataError, match='r_missing.png'):
     load_scene(Config(dataset_loader='blender', data_dir=str(tmp_path), scene='lego',
                       n_input_views=1, use_ndc=False))
+
+
+# ---------------------------------------------------------------- spurious near bounds
+def test_raise_near_bounds():
+  b = np.array([[2., 100.], [20., 80.], [5., 10.]])
+  np.testing.assert_array_equal(raise_near_bounds(b, 14.), [[14., 100.], [20., 80.],
+                                                            [14., 14.]])
+
+
+def test_bounds_warning_names_file_and_spares_llff_captures():
+  for name in ('fern', 'orchids', 'fortress'):
+    b = np.load(LLFF_DIR / name / 'poses_bounds.npy')[:, 15:]
+    assert bounds_warning(b, name) is None, name
+  for name in ('room', 'trex'):
+    b = np.load(LLFF_DIR / name / 'poses_bounds.npy')[:, 15:]
+    msg = bounds_warning(b, f'{name}/poses_bounds.npy')
+    assert msg.startswith(f'{name}/poses_bounds.npy: near bounds vary')
+    assert 'Config.llff_min_near' in msg
+
+
+def test_llff_min_near_rescales_only_its_scene(tmp_path, caplog):
+  """A near bound 10x too small in one image shrinks the scene 10x (warned); the override
+  restores the scale of the clean capture, and only for the scene it names."""
+  root = _fake_llff(tmp_path)
+  clean = load_scene(_cfg(root))
+  arr = np.load(root / 'toy' / 'poses_bounds.npy')
+  true_near = arr[:, 15].min()
+  arr[2, 15] = true_near / 10.
+  np.save(root / 'toy' / 'poses_bounds.npy', arr)
+  with caplog.at_level('WARNING'):
+    spurious = load_scene(_cfg(root))
+  assert 'poses_bounds.npy: near bounds vary 10' in caplog.text
+  spread = lambda s: np.abs(s.poses[:, :3, 3]).max()
+  assert spread(spurious) == pytest.approx(10. * spread(clean), rel=1e-4)
+  fixed = load_scene(_cfg(root, llff_min_near=(('toy', float(true_near)), ('other', 1e3))))
+  np.testing.assert_allclose(fixed.poses, clean.poses, atol=1e-6)
+  assert fixed.focus_depth == pytest.approx(clean.focus_depth)
+  assert _cfg(root, llff_min_near=(('other', 1e3),)).llff_min_near == ()
+  with pytest.raises(ConfigError, match='llff_min_near'):
+    _cfg(root, llff_min_near=(('toy', 0.),))

@@ -1,4 +1,5 @@
 """LLFF scenes: poses_bounds.npy + images_<factor>/, RegNeRF protocol."""
+import logging
 import os
 
 import numpy as np
@@ -33,19 +34,69 @@ def read_poses_bounds(path):
   return poses, bounds
 
 
+def raise_near_bounds(bounds, min_near: float):
+  """Raises every per-image near bound to at least min_near (far bounds kept above it).
+
+  Args:
+    bounds: [N, 2] near/far depth bounds in poses_bounds.npy units.
+    min_near: the smallest near bound allowed (> 0).
+
+  Returns:
+    [N, 2] bounds with near >= min_near and far >= near.
+  """
+  near = np.maximum(bounds[:, 0], min_near)
+  return np.stack([near, np.maximum(bounds[:, 1], near)], axis=1)
+
+
+def bounds_warning(bounds, path):
+  """A one-line warning when a capture's depth bounds look set by spurious near points,
+  else None.
+
+  RegNeRF's LLFF processing scales the scene by 1 / (0.75 min near bound), so one image
+  with a near bound far below the others' pushes the whole scene towards NDC's far end.
+  LLFF's own captures (fern, orchids, fortress here) have near bounds within 1.3x of each
+  other and far / near around 4-6; the re-processed room and trex in ../shared have 4-5x
+  and 22 (their near bounds are 3-12x smaller than the depths triangulated from the images,
+  experiments/results/README.md).
+
+  Args:
+    bounds: [N, 2] near/far bounds. path: the file they came from (named in the warning).
+
+  Returns:
+    str or None.
+  """
+  near_spread = float(bounds[:, 0].max() / bounds[:, 0].min())
+  far_near = float(np.median(bounds[:, 1] / bounds[:, 0]))
+  if near_spread > 2. or far_near > 12.:
+    return (f'{path}: near bounds vary {near_spread:.1f}x across images and the median '
+            f'far/near is {far_near:.1f} (LLFF captures: under 2 and 12); spurious near '
+            'points make the scene tiny in NDC. Check the bounds, or set '
+            'Config.llff_min_near for this scene')
+  return None
+
+
 def load_llff(config) -> Scene:
   """Loads an LLFF scene with RegNeRF's processing and few-shot split.
 
   Reads <data_dir>/<scene>/poses_bounds.npy and images_<factor>/; converts poses to the
-  OpenGL convention, scales focal by 1/factor, rescales by 1/(0.75 * min bound) and
-  recentres on the average pose. Rays use NDC when config.use_ndc.
+  OpenGL convention, scales focal by 1/factor, raises the near bounds to
+  Config.llff_min_near where it names this scene (warns when the bounds look spurious:
+  bounds_warning), rescales by 1/(0.75 * min bound) and recentres on the average pose.
+  Rays use NDC when config.use_ndc.
   """
   if not os.path.isdir(config.data_dir):
     raise DataError(f'data directory not found: {config.data_dir!r} (Config.data_dir)')
   scene_dir = os.path.join(config.data_dir, config.scene)
   if not os.path.isdir(scene_dir):
     raise DataError(f'scene folder not found: {scene_dir} (Config.scene={config.scene!r})')
-  poses_raw, bounds = read_poses_bounds(os.path.join(scene_dir, 'poses_bounds.npy'))
+  bounds_path = os.path.join(scene_dir, 'poses_bounds.npy')
+  poses_raw, bounds = read_poses_bounds(bounds_path)
+  for name, min_near in config.llff_min_near:
+    if name == config.scene:
+      bounds = raise_near_bounds(bounds, float(min_near))
+  warning = bounds_warning(bounds, bounds_path)
+  if warning:
+    logging.warning(warning)
   suffix = f'_{config.factor}' if config.factor > 1 else ''
   img_dir = os.path.join(scene_dir, 'images' + suffix)
   paths = image_io.list_images(img_dir)
