@@ -13,7 +13,8 @@ Runs live in <out>/<name>/<scene>/<row>/seed<k> (resumable; finished runs are re
 invocations can be split by scene, seed and variant, each rewriting the table from every
 finished run it finds; --table writes a subset of them to other files). The
 converged-regime table on 2 CPU cores (five scenes x 3 seeds, run split by scene;
-experiments/results/scenes_conv2.md), and its masks and attribution rows on seed 0:
+experiments/results/scenes_conv2.md), and its attribution rows on seed 0 (further
+--variant rows, the mix and the factors, as in experiments/results/README.md):
 
   python experiments/renerf_scenes.py --name scenes_conv2 \
     --config experiments/configs/table_converged2.gin \
@@ -21,8 +22,8 @@ experiments/results/scenes_conv2.md), and its masks and attribution rows on seed
     --reuse experiments/results/conv2
   python experiments/renerf_scenes.py --name scenes_conv2 --table scenes_conv2_attribution \
     --config experiments/configs/table_converged2.gin --scenes fern trex --seeds 0 --no_2x \
-    --variant 'K 0.12=Config.pseudo_until_frac = 0.12' ... \
-    --variant 'R1 + masks=Config.use_masks = True'
+    --variant 'K 0.12=Config.pseudo_until_frac = 0.12' \
+    --variant 'K 0.5=Config.pseudo_until_frac = 0.5'
 
 Writes <out>/<name>.json, <name>.md and <name>.png (paired deltas per scene; --table
 names them otherwise).

@@ -7,6 +7,7 @@ exists in the compiled step: switched-off work costs nothing.
 import argparse
 import dataclasses
 import logging
+import math
 import os
 import sys
 from typing import Optional, Sequence, Tuple
@@ -70,7 +71,8 @@ class Config:
   # bounds look like that); gin_configs/modifiers/shared_bounds.gin has the values measured
   # for ../shared/data's re-processed room and trex. Off: (). Only the pair of
   # Config.scene is kept (so a run of another scene has the same Config with or without
-  # the modifier, and its run directory stays reusable).
+  # the modifier, and its run directory stays reusable): set the scene through gin or the
+  # constructor, never with dataclasses.replace (the other scenes' pairs are gone).
   llff_min_near: Tuple[Tuple[str, float], ...] = ()
   procedural_size: Tuple[int, int] = (48, 64)  # (H, W) of the embedded scene.
   procedural_views: int = 17  # Number of images the embedded scene renders.
@@ -197,9 +199,10 @@ class Config:
   lpips_nets: Tuple[str, ...] = _f(('alex', 'vgg'), 'report')
 
   def __post_init__(self):
-    _check(all(len(p) == 2 and isinstance(p[0], str) and isinstance(p[1], (int, float))
-               and p[1] > 0
-               for p in self.llff_min_near),
+    _check(isinstance(self.llff_min_near, (tuple, list)) and all(
+        isinstance(p, (tuple, list)) and len(p) == 2 and isinstance(p[0], str)
+        and isinstance(p[1], (int, float)) and not isinstance(p[1], bool)
+        and math.isfinite(p[1]) and p[1] > 0 for p in self.llff_min_near),
            f'Config.llff_min_near={self.llff_min_near!r} must be (scene name, near > 0) '
            'pairs')
     object.__setattr__(self, 'llff_min_near', tuple(

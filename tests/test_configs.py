@@ -204,14 +204,18 @@ def test_renerf_gin_on_any_base_adds_only_the_rounds(base):
                                c.depth_tv_maxstep, c.lr_delay_steps)
 
 
-def test_table_configs_include_a_base_and_renerf_only():
+def test_table_configs_include_a_base_renerf_and_modifiers_only():
   """No include chains: each table config includes a gin_configs/ base and renerf.gin (then
-  at most gin_configs/modifiers/ files) and states its own differences."""
+  at most gin_configs/modifiers/ files, which include nothing) and states its own
+  differences."""
   for path in glob.glob(os.path.join(TABLES, '*.gin')):
     with open(path) as f:
       includes = re.findall(r"^include '(.+)'", f.read(), re.M)
     assert includes[:2] == ['llff3_fast.gin', 'renerf.gin'], path
     assert all(i.startswith('modifiers/') for i in includes[2:]), path
+    for i in includes[2:]:
+      with open(os.path.join(GIN, i)) as f:
+        assert not re.search(r"^include ", f.read(), re.M), i
     assert all(os.path.isfile(os.path.join(GIN, i)) for i in includes)
 
 

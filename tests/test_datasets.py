@@ -207,6 +207,8 @@ def test_raise_near_bounds():
 
 
 def test_bounds_warning_names_file_and_spares_llff_captures():
+  """On ../shared/data's copies: LLFF's own captures pass, the re-processed room and trex
+  (spurious near bounds) are flagged."""
   for name in ('fern', 'orchids', 'fortress'):
     b = np.load(LLFF_DIR / name / 'poses_bounds.npy')[:, 15:]
     assert bounds_warning(b, name) is None, name
@@ -235,5 +237,7 @@ def test_llff_min_near_rescales_only_its_scene(tmp_path, caplog):
   np.testing.assert_allclose(fixed.poses, clean.poses, atol=1e-6)
   assert fixed.focus_depth == pytest.approx(clean.focus_depth)
   assert _cfg(root, llff_min_near=(('other', 1e3),)).llff_min_near == ()
-  with pytest.raises(ConfigError, match='llff_min_near'):
-    _cfg(root, llff_min_near=(('toy', 0.),))
+  for bad in [(('toy', 0.),), (('toy', float('inf')),), (('toy', True),), ((14., 'toy'),),
+              ('toy',)]:
+    with pytest.raises(ConfigError, match='llff_min_near'):
+      _cfg(root, llff_min_near=bad)
