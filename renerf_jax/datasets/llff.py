@@ -91,9 +91,8 @@ def load_llff(config) -> Scene:
     raise DataError(f'scene folder not found: {scene_dir} (Config.scene={config.scene!r})')
   bounds_path = os.path.join(scene_dir, 'poses_bounds.npy')
   poses_raw, bounds = read_poses_bounds(bounds_path)
-  for name, min_near in config.llff_min_near:
-    if name == config.scene:
-      bounds = raise_near_bounds(bounds, float(min_near))
+  for _, min_near in config.llff_min_near:  # Config keeps only Config.scene's pair.
+    bounds = raise_near_bounds(bounds, min_near)
   warning = bounds_warning(bounds, bounds_path)
   if warning:
     logging.warning(warning)
