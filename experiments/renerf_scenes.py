@@ -143,8 +143,8 @@ def scene_runs(args, scene_name, base_bindings):
     steps = tables.equal_time_steps(root, config, runs, dirs)
     for seed in args.seeds:
       cfg = dataclasses.replace(config, seed=seed, num_rounds=0, max_steps=steps)
-      rows.setdefault(f'B equal time ({steps} steps)', {})[seed] = run(
-          cfg, scene, os.path.join(root, 'B equal time', f'seed{seed}'))[0]
+      rows.setdefault('B equal time', {})[seed] = dict(run(
+          cfg, scene, os.path.join(root, 'B equal time', f'seed{seed}'))[0], steps=steps)
   return rows
 
 
@@ -170,6 +170,9 @@ def summarize(all_rows, scenes, seeds):
       entry = {k: tables.mean_std([m[k] for m in by_seed.values()]) for k in METRICS
                if all(k in m for m in by_seed.values())}
       entry['seconds'] = tables.mean_std([m['cumulative_seconds'] for m in by_seed.values()])
+      steps = sorted({m['steps'] for m in by_seed.values() if 'steps' in m})
+      if steps:  # B at the rounds' total time: this scene's step count
+        entry['steps'] = steps
       if label != 'B':
         entry['paired'] = pair_stats(pairs_of(all_rows, [sc], seeds, label, 'B'))
       if label not in ('B', 'R1') and 'R1' in rows:  # e.g. masks on/off, R1 vs B 2x
@@ -222,7 +225,8 @@ def markdown(summary, scenes, command):
         continue
       cell = lambda k, d: f'{e[k][0]:.{d}f} +- {e[k][1]:.{d}f}' if k in e else ''
       p, q = e.get('paired', {}), e.get('paired_R1', {})
-      lines.append(f"| {label} | {cell('psnr', 2)} | {cell('ssim', 3)} | "
+      shown = f"{label} ({', '.join(map(str, e['steps']))} steps)" if 'steps' in e else label
+      lines.append(f"| {shown} | {cell('psnr', 2)} | {cell('ssim', 3)} | "
                    f"{cell('lpips_alex', 3)} | {e['seconds'][0]:.0f} | "
                    f"{fmt_triple(p)} | {fmt_triple(q)} |")
     if pd:

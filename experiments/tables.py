@@ -18,8 +18,10 @@ and 'stop aug. views'): rendered once per seed, the copy keeps their render seco
 Optionally (--equal_time) the baseline is also trained for the same total wall time as
 the rounds of the first variant (training + pseudo-view synthesis + uncertainty): a FIXED
 step count, the same for every seed, stored in <out>/<name>/equal_time.json and reused:
-the median over seeds of (cumulative seconds of the rounds) / (baseline seconds per step).
-The median makes it robust to one seed having shared the CPU with something else.
+the median over seeds of the sum over rounds of max_steps x (round seconds) / (that
+round's training seconds), so each round is counted at its own pace and the load on the
+machine when it ran cancels. The median makes it robust to one seed whose synthesis shared
+the CPU with something its training did not.
 
 Writes <out>/<name>.json, <name>.md (our numbers; the paper's beside them where the
 script has them), <name>_time.png (cheap test PSNR during training against cumulative
@@ -165,18 +167,66 @@ def summarize(label, runs, rounds):
   return rows
 
 
+def round_step_equivalents(max_steps, round_seconds, train_seconds):
+  """Steps of plain training worth one round's time, at that round's own pace.
+
+  A round trains max_steps steps in train_seconds and spends round_seconds in all
+  (training plus pseudo-view synthesis and uncertainty). Measuring each round against its
+  own training pace cancels the load on the machine, which differs between rounds run at
+  different times: rounds on an idle machine and on a busy one count alike. It assumes a
+  step of the baseline costs what a step of the round costs (the same config; the rounds'
+  pseudo-rays replace real rays in the same batch).
+
+  Args:
+    max_steps: training steps of the round.
+    round_seconds: the round's seconds in all.
+    train_seconds: the seconds of its training loop (> 0).
+
+  Returns:
+    max_steps * round_seconds / train_seconds.
+  """
+  if not train_seconds > 0:
+    raise ValueError(f'train_seconds must be > 0 (got {train_seconds!r})')
+  return max_steps * round_seconds / train_seconds
+
+
+EQUAL_TIME_RULE = ('median over seeds of the sum over rounds of max_steps x round seconds / '
+                   'that round\'s training seconds')
+
+
+def synthesis_seconds(run_dir, r):
+  """Seconds of round r's pseudo-view synthesis (0 for the baseline), from its timing.json."""
+  if r == 0:
+    return 0.
+  path = os.path.join(resume.round_dir(run_dir, r), 'pseudo_views', 'timing.json')
+  if not os.path.isfile(path):
+    raise SystemExit(f'error: {path} not found (round {r} has no synthesis timing)')
+  return report.read_json(path)['seconds']
+
+
 def equal_time_steps(root, config, runs, run_dirs):
-  """Fixed step count of the equal-total-time baseline (computed once, then reused)."""
+  """Fixed step count of the equal-total-time baseline (computed once, then reused).
+
+  Per seed, the sum over rounds of round_step_equivalents (each round at its own pace:
+  training seconds = round seconds - synthesis seconds); the median over seeds. A stored
+  equal_time.json made with another rule is refused (delete it to recompute).
+  """
   path = os.path.join(root, 'equal_time.json')
   if os.path.isfile(path):
-    return report.read_json(path)['max_steps']
-  per_seed = [m[-1]['cumulative_seconds'] / (m[0]['round_seconds'] / config.max_steps)
-              for m in runs]
+    saved = report.read_json(path)
+    if saved.get('rule') != EQUAL_TIME_RULE:
+      raise SystemExit(f'error: {path} was computed with another rule '
+                       f'({saved.get("rule")!r}); delete it to recompute the step count')
+    return saved['max_steps']
+  per_seed = []
+  for ms, run_dir in zip(runs, run_dirs):
+    per_seed.append(sum(
+        round_step_equivalents(config.max_steps, m['round_seconds'],
+                               m['round_seconds'] - synthesis_seconds(run_dir, m['round']))
+        for m in ms))
   steps = round(float(np.median(per_seed)))
   report.write_json(path, {'max_steps': steps, 'per_seed_steps': per_seed,
-                           'from_runs': run_dirs,
-                           'rule': 'median over seeds of cumulative seconds of the '
-                                   'rounds / baseline seconds per step'})
+                           'from_runs': run_dirs, 'rule': EQUAL_TIME_RULE})
   return steps
 
 

@@ -133,6 +133,49 @@ def test_metric_curves_follow_each_variant_over_its_rounds():
   assert curves['LPIPS-alex']['Re-Nerfing'][1] == (220, 1 - 19.5 / 40, 0.)
 
 
+def test_equal_time_counts_each_round_at_its_own_pace(tmp_path):
+  """A round run on a busier machine (every part slower alike) is worth the same steps:
+  training seconds = round seconds - the synthesis seconds of its timing.json."""
+  sys.path.insert(0, str(REPO / 'experiments'))
+  import tables  # pylint: disable=g-import-not-at-top
+  from renerf_jax import report  # pylint: disable=g-import-not-at-top
+  assert tables.round_step_equivalents(100, 120., 100.) == pytest.approx(120.)
+  assert tables.round_step_equivalents(100, 360., 300.) == pytest.approx(120.)
+  with pytest.raises(ValueError, match='train_seconds'):
+    tables.round_step_equivalents(100, 10., 0.)
+
+  class Cfg:  # equal_time_steps reads max_steps only
+    max_steps = 100
+
+  def fake_run(name, paces):  # per round: (round seconds, train seconds)
+    run_dir = tmp_path / name
+    for r, (total, train) in enumerate(paces[1:], start=1):
+      d = run_dir / f'round_{r}' / 'pseudo_views'
+      d.mkdir(parents=True)
+      report.write_json(str(d / 'timing.json'), {'seconds': total - train})
+    return [{'round': r, 'round_seconds': t} for r, (t, _) in enumerate(paces)], str(run_dir)
+
+  # B idle (100 s), R1 three times slower (busy machine) with 20% synthesis on top.
+  a, da = fake_run('a', [(100., 100.), (360., 300.)])
+  b, db = fake_run('b', [(50., 50.), (130., 100.)])  # 130 steps' worth in round 1
+  c, dc = fake_run('c', [(80., 80.), (110., 100.)])
+  root = tmp_path / 'table'
+  root.mkdir()
+  assert tables.equal_time_steps(str(root), Cfg, [a, b, c], [da, db, dc]) == 220  # median
+  saved = report.read_json(str(root / 'equal_time.json'))
+  assert saved['per_seed_steps'] == pytest.approx([220., 230., 210.])
+  # Computed once: a later call reuses it whatever the runs say.
+  assert tables.equal_time_steps(str(root), Cfg, [b], [db]) == 220
+  # One made with another rule is refused in one line, not silently reused.
+  report.write_json(str(root / 'equal_time.json'), dict(saved, rule='old'))
+  with pytest.raises(SystemExit, match='another rule'):
+    tables.equal_time_steps(str(root), Cfg, [b], [db])
+  # A round without its synthesis timing is named.
+  (tmp_path / 'b' / 'round_1' / 'pseudo_views' / 'timing.json').unlink()
+  with pytest.raises(SystemExit, match='timing.json not found'):
+    tables.equal_time_steps(str(tmp_path / 'other'), Cfg, [b], [db])
+
+
 def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path):
   """experiments/renerf_scenes.py: R1..R3, a masks row trained from the same B, B 2x
   longer and B at the rounds' total time, with paired deltas and win counts."""
@@ -150,7 +193,8 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   rows = result['rows']['procedural']
   eq = json.loads((out / 's' / 'procedural' / 'equal_time.json').read_text())
   assert set(rows) == {'B', 'R1', 'R2', 'R3', 'R1 + masks', 'B 2x steps',
-                       f"B equal time ({eq['max_steps']} steps)"}
+                       'B equal time'}
+  assert {m['steps'] for m in rows['B equal time'].values()} == {eq['max_steps']}
   # The masks row is R1 trained from the same B: its round_0 is the Re-Nerfing run's.
   root = out / 's' / 'procedural'
   for s in (0, 1):
@@ -169,6 +213,7 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   assert 'paired_R1' not in result['summary']['scenes']['procedural']['R1']
   md = (out / 's.md').read_text()
   assert 'B 2x steps' in md and 'wins' in md and (out / 's.png').stat().st_size > 0
+  assert f"| B equal time ({eq['max_steps']} steps) |" in md
   # --table: a subset of the same runs (reused, nothing trained) into other files.
   before = tree_files(out / 's')
   sub = subprocess.run(cmd + ['--table', 't', '--seeds', '0'], cwd=REPO, capture_output=True,
@@ -177,3 +222,47 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   assert tree_files(out / 's') == before and (out / 's.md').read_text() == md
   sub_rows = json.loads((out / 't.json').read_text())['rows']['procedural']
   assert sub_rows['R1'] == {'0': rows['R1']['0']}
+
+
+def test_equal_time_comparison_takes_given_idle_rates_and_per_method_seeds(tmp_path):
+  """experiments/compare_equal_time.py with --sec_per_step (no calibration: steps = budget /
+  the given rate, curve time = step x rate) and --seeds_of; bad values fail in one line."""
+  out = tmp_path / 'results'
+  cmd = lambda *opts: ([sys.executable, 'experiments/compare_equal_time.py', '--name', 'eq',
+                        '--base', 'gin_configs/demo.gin', '--out', str(out), '--budget_s', '6',
+                        '--seeds', '0', '1', '--method', 'A=', '--method',
+                        'B=gin_configs/modifiers/no_depth_tv.gin', '--calib_steps', '2']
+                       + [f'--gin_bindings={b}' for b in TINY] + list(opts))
+  good = ['--sec_per_step', 'A=0.5', '--seeds_of', 'B=1']
+  res = subprocess.run(cmd(*good), cwd=REPO, capture_output=True, text=True, timeout=600,
+                       check=False)
+  assert res.returncode == 0, res.stderr[-3000:]
+  eq = json.loads((out / 'eq.json').read_text())
+  a, b = eq['methods']
+  assert a['sec_per_step'] == 0.5 and a['sec_per_step_given'] and a['max_steps'] == 12
+  assert a['seeds'] == [0, 1] and [r['seed'] for r in a['runs']] == [0, 1]
+  assert b['seeds'] == [1] and [r['seed'] for r in b['runs']] == [1]
+  assert not b['sec_per_step_given'] and b['max_steps'] == max(int(6 / b['sec_per_step']), 1)
+  calib = json.loads((out / 'eq' / 'A' / 'calibration.json').read_text())
+  assert calib == {'sec_per_step': 0.5, 'source': '--sec_per_step'}
+  md = (out / 'eq.md').read_text()
+  assert '| A | 0, 1 | 12 | 0.500 (given) |' in md and '| B | 1 |' in md
+  assert '"s / step (given)"' in md and (out / 'eq_curves.png').stat().st_size > 0
+  # A rerun without the flags reuses the runs and keeps A's rate marked as given.
+  before = tree_files(out / 'eq')
+  res = subprocess.run(cmd('--seeds_of', 'B=1'), cwd=REPO, capture_output=True, text=True,
+                       timeout=600, check=False)
+  assert res.returncode == 0, res.stderr[-3000:]
+  assert json.loads((out / 'eq.json').read_text())['methods'][0]['sec_per_step_given']
+  assert tree_files(out / 'eq') == before
+  # Bad values fail in one line, before anything trains.
+  for opts, message in ((['--sec_per_step', 'A=0.25'], 'holds 0.5 s/step'),
+                        (['--sec_per_step', 'C=1'], "no --method is labelled 'C'"),
+                        (['--sec_per_step', 'B=-1'], 'not a positive number'),
+                        (['--sec_per_step', 'A=1', '--sec_per_step', 'A=2'], 'given twice'),
+                        (['--seeds_of', 'B=x'], 'not a comma-separated list'),
+                        (['--seeds_of', 'B=1,1'], 'not a comma-separated list')):
+    bad = subprocess.run(cmd(*opts), cwd=REPO, capture_output=True, text=True, timeout=300,
+                         check=False)
+    assert bad.returncode != 0 and message in bad.stderr, bad.stderr[-2000:]
+    assert 'Traceback' not in bad.stderr
