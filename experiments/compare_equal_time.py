@@ -45,6 +45,7 @@ from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import make_pools
 from renerf_jax.resume import run_rounds
+import tables  # pylint: disable=g-import-not-at-top,g-bad-import-order
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 
@@ -63,21 +64,6 @@ def seconds_per_step(config, scene, steps):
     jax.block_until_ready(stats)
     times.append(time.perf_counter() - t)
   return float(np.median(times))
-
-
-def _pairs(specs, what, labels):
-  """{LABEL: VALUE} of 'LABEL=VALUE' specs; LABEL must be one of labels, given once."""
-  out = {}
-  for spec in specs:
-    label, sep, value = spec.partition('=')
-    if not sep or not label or not value:
-      raise SystemExit(f'error: {what} {spec!r} is not LABEL=VALUE')
-    if label not in labels:
-      raise SystemExit(f'error: {what} {spec!r}: no --method is labelled {label!r}')
-    if label in out:
-      raise SystemExit(f'error: {what} is given twice for {label!r}')
-    out[label] = value
-  return out
 
 
 def _positive(text, what):
@@ -119,11 +105,9 @@ def stored_rates(out, name, labels, given):
 
 
 def mean_std(rows, key):
-  """(mean, std, count) of rows[i][key] over the rows that have it."""
-  vals = np.array([r[key] for r in rows if key in r], np.float64)
-  if not vals.size:
-    return float('nan'), float('nan'), 0
-  return float(vals.mean()), float(vals.std(ddof=1)) if len(vals) > 1 else 0., int(vals.size)
+  """(mean, std, count) of rows[i][key] over the rows that have it (nan, nan, 0 if none)."""
+  vals = [r[key] for r in rows if key in r]
+  return (*tables.mean_std(vals), len(vals)) if vals else (float('nan'), float('nan'), 0)
 
 
 def main():
@@ -145,9 +129,9 @@ def main():
   args = p.parse_args()
   labels = [spec.partition('=')[0] for spec in args.method]
   given = {k: _positive(v, f'--sec_per_step {k}')
-           for k, v in _pairs(args.sec_per_step, '--sec_per_step', labels).items()}
+           for k, v in tables.label_values(args.sec_per_step, '--sec_per_step', labels).items()}
   seeds_of = {k: _seeds(v, f'--seeds_of {k}')
-              for k, v in _pairs(args.seeds_of, '--seeds_of', labels).items()}
+              for k, v in tables.label_values(args.seeds_of, '--seeds_of', labels).items()}
   stored = stored_rates(args.out, args.name, labels, given)
   jit_cache.enable_compilation_cache()
 

@@ -23,18 +23,9 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from renerf_jax import report  # pylint: disable=g-import-not-at-top
+import tables  # pylint: disable=g-import-not-at-top,g-bad-import-order
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
-
-
-def _pairs(specs, what):
-  out = {}
-  for spec in specs:
-    label, sep, value = spec.partition('=')
-    if not sep or not label or not value:
-      raise SystemExit(f'error: {what} {spec!r} is not LABEL=VALUE')
-    out[label] = value
-  return out
 
 
 def read_run(run_dir, sec_per_step=None):
@@ -55,8 +46,8 @@ def main(argv=None):
   p.add_argument('--sec_per_step', action='append', default=[], help='LABEL=SECONDS')
   p.add_argument('--out', default='experiments/results')
   args = p.parse_args(argv)
-  runs = _pairs(args.run, '--run')
-  rates = {k: float(v) for k, v in _pairs(args.sec_per_step, '--sec_per_step').items()}
+  runs = tables.label_values(args.run, '--run')
+  rates = {k: float(v) for k, v in tables.label_values(args.sec_per_step, '--sec_per_step').items()}
   unknown = set(rates) - set(runs)
   if unknown:
     raise SystemExit(f'error: --sec_per_step for unknown label(s) {sorted(unknown)}')

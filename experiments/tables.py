@@ -92,6 +92,30 @@ def mean_std(vals):
   return float(vals.mean()), (float(vals.std(ddof=1)) if len(vals) > 1 else 0.)
 
 
+def label_values(specs, what, labels=None):
+  """{LABEL: VALUE} of command-line 'LABEL=VALUE' specs (one clear error line if malformed).
+
+  Args:
+    specs: the strings given to an option. what: the option's name, for the error.
+    labels: if given, the labels allowed; each may then be given once.
+
+  Returns:
+    dict in the order given (a repeated label keeps its last value when labels is None).
+  """
+  out = {}
+  for spec in specs:
+    label, sep, value = spec.partition('=')
+    if not sep or not label or not value:
+      raise SystemExit(f'error: {what} {spec!r} is not LABEL=VALUE')
+    if labels is not None:
+      if label not in labels:
+        raise SystemExit(f'error: {what} {spec!r}: no --method is labelled {label!r}')
+      if label in out:
+        raise SystemExit(f'error: {what} is given twice for {label!r}')
+    out[label] = value
+  return out
+
+
 def round_name(r):
   return 'baseline' if r == 0 else f'R{r}'
 
