@@ -113,7 +113,7 @@ def bench_hessian(config, scene, rays, params, chunk, repeats):
   part = jax.tree_util.tree_map(lambda x: x[:chunk], rays)
   valid = np.ones((chunk,), np.float32)
   zeros = lambda: np.zeros((deformation.grid_size(log2_res), 3), np.float32)
-  args = lambda: (cfg, log2_res, params, part, valid, lo, hi, zeros(), zeros())
+  args = lambda: (cfg, log2_res, params, part, valid, lo, hi, zeros(), zeros(), zeros())
   # pylint: disable=protected-access
   compile_s, gflop = _compile(laplace._hessian_chunk, *args())
   sec = time_calls(lambda: laplace._hessian_chunk(*args()), repeats)

@@ -2,9 +2,10 @@
 
 For every scene and seed: the baseline B, Re-Nerfing R1 (D trained from scratch on the
 real views plus B's pseudo-views), and B trained 2x longer (for R1 also the equal-time
-control). With --rounds_scenes, those scenes also get R2, R3 and B trained for the
-rounds' total time. Extra rows (--variant 'LABEL=bindings', e.g. R1 with the masks or an
-attribution of K, the mix or the factors) train R1 from the same B (copied bit for bit).
+control; --scenes_2x limits it to some scenes). With --rounds_scenes, those scenes also
+get R2, R3 and B trained for the rounds' total time. Extra rows (--variant
+'LABEL=bindings', e.g. R1 with the masks or an attribution of K, the mix or the factors)
+train R1 from the same B (copied bit for bit).
 Every number is paired by seed: D minus B of the same (scene, seed), as mean +- std over
 pairs and the count of pairs where D beats B in PSNR, SSIM and LPIPS; the paper's
 per-scene R1 deltas (RegNeRF base, full scale) stand beside ours.
@@ -25,11 +26,18 @@ experiments/results/scenes_conv2.md), and its attribution rows on seed 0 (furthe
     --variant 'K 0.12=Config.pseudo_until_frac = 0.12' \
     --variant 'K 0.5=Config.pseudo_until_frac = 0.5'
 
+Tables made separately (e.g. one per scene, in parallel) are put into one with --merge,
+which reads their .json rows and trains nothing (experiments/results/scenes_conv3.md):
+
+  python experiments/renerf_scenes.py --name scenes_conv3 --merge \
+    experiments/results/scenes_conv3_{fern,orchids,room,trex,fortress}.json
+
 Writes <out>/<name>.json, <name>.md and <name>.png (paired deltas per scene; --table
 names them otherwise).
 """
 import argparse
 import dataclasses
+import json
 import os
 import shlex
 import sys
@@ -66,7 +74,8 @@ def parser():
   p = argparse.ArgumentParser(description=__doc__,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
   p.add_argument('--name', required=True)
-  p.add_argument('--config', nargs='+', required=True, help='gin config file(s)')
+  p.add_argument('--config', nargs='+', default=None,
+                 help='gin config file(s) (required unless --merge)')
   p.add_argument('--data_dir', default='../shared/data/nerf_llff_data')
   p.add_argument('--scenes', nargs='+', default=['fern'])
   p.add_argument('--seeds', type=int, nargs='+', default=[0, 1, 2])
@@ -75,6 +84,9 @@ def parser():
   p.add_argument('--variant', action='append', default=[],
                  help="extra R1 row 'LABEL=binding;binding' trained from the same B")
   p.add_argument('--no_2x', action='store_true', help='skip B trained 2x longer')
+  p.add_argument('--scenes_2x', nargs='*', default=None,
+                 help='only these scenes get B trained 2x longer (default: all of '
+                      '--scenes; given with no scene: none, as --no_2x)')
   p.add_argument('--reuse', default=None,
                  help='a convergence.py results folder (<out>/<name>): its finished runs '
                       '<scene>/N<steps>/seed<k> made with the same config (and --data_dir) '
@@ -84,7 +96,44 @@ def parser():
   p.add_argument('--table', default=None,
                  help='name of the written table files (default --name): tabulate a subset '
                       'of the runs under <out>/<name> without overwriting the full table')
+  p.add_argument('--merge', nargs='+', default=None, metavar='JSON',
+                 help='build the table from the rows of finished tables (their .json, e.g. '
+                      'one per scene) instead of running: all must come from the same '
+                      '--config, --gin_bindings and --data_dir; trains nothing')
   return p
+
+
+def merged_rows(paths):
+  """Rows of finished tables, merged: ({scene: {label: {seed: metrics}}}, seeds, their
+  commands, (config, gin_bindings, data_dir)). Raises SystemExit with one line on a
+  missing/unreadable file, on tables of different settings, or on one (scene, row, seed)
+  with two different results."""
+  rows, seeds, commands, setting = {}, [], [], None
+  for path in paths:
+    try:
+      with open(path, encoding='utf-8') as f:
+        table = json.load(f)
+      src = parser().parse_args(shlex.split(table['command'])[2:])
+      table_rows = table['rows']
+    except (OSError, ValueError, KeyError, SystemExit) as e:
+      raise SystemExit(f'--merge: {path} is not a renerf_scenes table ({e})') from None
+    this = (src.config, src.gin_bindings, src.data_dir)
+    if setting is not None and this != setting:
+      raise SystemExit(f'--merge: {path} was made with --config/--gin_bindings/--data_dir '
+                       f'{this}, not {setting} as {paths[0]}')
+    setting = this
+    commands.append(table['command'])
+    for scene, labels in table_rows.items():
+      for label, by_seed in labels.items():
+        for seed, m in by_seed.items():
+          have = rows.setdefault(scene, {}).setdefault(label, {})
+          if int(seed) in have and have[int(seed)] != m:
+            raise SystemExit(f'--merge: {path} holds another result for {scene} / {label} '
+                             f'/ seed {seed} than an earlier table')
+          have[int(seed)] = m
+          if int(seed) not in seeds:
+            seeds.append(int(seed))
+  return rows, sorted(seeds), commands, setting
 
 
 def run(config, scene, run_dir, share=()):
@@ -130,7 +179,7 @@ def scene_runs(args, scene_name, base_bindings):
       ms = run(cfg, scene, os.path.join(root, label, f'seed{seed}'),
                [os.path.join(root, 'Re-Nerfing', f'seed{seed}')])
       rows.setdefault(label, {})[seed] = ms[1]
-  if not args.no_2x:
+  if not args.no_2x and (args.scenes_2x is None or scene_name in args.scenes_2x):
     for seed in args.seeds:
       cfg = dataclasses.replace(config, seed=seed, num_rounds=0,
                                 max_steps=2 * config.max_steps)
@@ -211,7 +260,7 @@ def fmt_triple(p):
   return f"{fmt_pair(p, 'psnr')} | {fmt_pair(p, 'ssim', 3)} | {fmt_pair(p, 'lpips_alex', 3)}"
 
 
-def markdown(summary, scenes, command):
+def markdown(summary, scenes, command, sources=()):
   lines = []
   for sc in scenes:
     res = summary['scenes'][sc]
@@ -251,6 +300,8 @@ def markdown(summary, scenes, command):
             'against R1 without; B 2x steps against R1 at about equal time). Two identical '
             'runs differ by 0.2-0.5 dB, so a mean delta inside its std is no gain.', '',
             'Command:', '', f'    {command}', '']
+  if sources:
+    lines += ['Merged from the tables of:', ''] + [f'    {c}' for c in sources] + ['']
   return '\n'.join(lines)
 
 
@@ -282,19 +333,41 @@ def plot(summary, scenes, path):
 
 
 def main(argv=None):
-  args = parser().parse_args(argv)
+  p = parser()
+  args = p.parse_args(argv)
+  command = 'python ' + shlex.join(
+      sys.argv if argv is None else ['experiments/renerf_scenes.py'] + list(argv))
+  table = args.table or args.name
+  if args.merge:
+    all_rows, seeds, sources, (config, _, _) = merged_rows(args.merge)
+    scenes = list(all_rows)
+    summary = summarize(all_rows, scenes, seeds)
+    write_table(args.out, table, {'name': args.name, 'config': config, 'seeds': seeds,
+                                  'rows': all_rows, 'summary': summary, 'command': command,
+                                  'sources': sources}, scenes, command, sources)
+    return
+  if not args.config:
+    p.error('--config is required unless --merge is given')
+  for flag, names in (('--rounds_scenes', args.rounds_scenes),
+                      ('--scenes_2x', args.scenes_2x or [])):
+    extra = [n for n in names if n not in args.scenes]
+    if extra:
+      p.error(f'{flag} names {", ".join(extra)}, not in --scenes ({" ".join(args.scenes)})')
   jit_cache.enable_compilation_cache()
   bindings = args.gin_bindings + [f'Config.data_dir = {args.data_dir!r}']
   all_rows = {sc: scene_runs(args, sc, bindings) for sc in args.scenes}
   summary = summarize(all_rows, args.scenes, args.seeds)
-  command = 'python ' + shlex.join(sys.argv)
-  table = args.table or args.name
-  report.write_json(os.path.join(args.out, table + '.json'),
-                    {'name': args.name, 'config': args.config, 'seeds': args.seeds,
-                     'rows': all_rows, 'summary': summary, 'command': command})
-  text = markdown(summary, args.scenes, command)
-  report.write_markdown(os.path.join(args.out, table + '.md'), text)
-  plot(summary, args.scenes, os.path.join(args.out, table + '.png'))
+  write_table(args.out, table, {'name': args.name, 'config': args.config, 'seeds': args.seeds,
+                                'rows': all_rows, 'summary': summary, 'command': command},
+              args.scenes, command)
+
+
+def write_table(out, table, result, scenes, command, sources=()):
+  """Writes <out>/<table>.json, .md and .png and prints the markdown."""
+  report.write_json(os.path.join(out, table + '.json'), result)
+  text = markdown(result['summary'], scenes, command, sources)
+  report.write_markdown(os.path.join(out, table + '.md'), text)
+  plot(result['summary'], scenes, os.path.join(out, table + '.png'))
   print(text)
 
 

@@ -101,8 +101,9 @@ def per_ray_vertex_jtj(sens, means, lo, hi, n: int):
 
   The Jacobian of rgb_c w.r.t. vertex v's offset on axis a is sum_i sens[c, i, a] w_i(v)
   over the ray's samples i (w_i(v) the trilinear weight of v at sample i). Each row's 8 S
-  (vertex id, contribution) pairs are sorted by id, equal ids segment-summed, and the
-  totals squared and summed over channels.
+  vertex ids are sorted (ids only, with their positions: the 9 contributions per entry
+  are not moved through the sort), equal ids numbered as one segment, and each entry's
+  contributions segment-summed in place; the totals are squared and summed over channels.
 
   Args:
     sens: [3, levels, B, S, 3] from sample_sensitivities.
@@ -118,39 +119,75 @@ def per_ray_vertex_jtj(sens, means, lo, hi, n: int):
   k = ids.shape[2] * ids.shape[3]
   vals = jnp.einsum('clbsa,lbsk->lbskca', sens, w).reshape(rows, k, 9)
   ids = ids.reshape(rows, k)
-  sorted_ops = jax.lax.sort((ids,) + tuple(vals[..., j] for j in range(9)), dimension=1,
-                            num_keys=1)
-  ids_sorted = sorted_ops[0]
-  vals_sorted = jnp.stack(sorted_ops[1:], axis=-1)  # [rows, K, 9]
+  row = jnp.arange(rows, dtype=jnp.int32)[:, None]
+  pos = jnp.broadcast_to(jnp.arange(k, dtype=jnp.int32), (rows, k))
+  ids_sorted, perm = jax.lax.sort((ids, pos), dimension=1, num_keys=1)
   new_seg = jnp.concatenate([jnp.ones((rows, 1), bool),
                              ids_sorted[:, 1:] != ids_sorted[:, :-1]], axis=1)
-  seg = jnp.cumsum(new_seg, axis=1, dtype=jnp.int32) - 1
-  seg = (seg + k * jnp.arange(rows, dtype=jnp.int32)[:, None]).reshape(-1)
+  seg_sorted = jnp.cumsum(new_seg, axis=1, dtype=jnp.int32) - 1 + k * row
+  seg = jnp.zeros((rows, k), jnp.int32).at[row, perm].set(seg_sorted).reshape(-1)
   m = rows * k
-  totals = jax.ops.segment_sum(vals_sorted.reshape(m, 9), seg, num_segments=m,
-                               indices_are_sorted=True)
-  seg_ids = jnp.zeros((m,), jnp.int32).at[seg].set(ids_sorted.reshape(-1))
+  totals = jax.ops.segment_sum(vals.reshape(m, 9), seg, num_segments=m)
+  seg_ids = jnp.zeros((m,), jnp.int32).at[seg].set(ids.reshape(-1))
   sq = jnp.sum(totals.reshape(m, 3, 3)**2, axis=1)  # Sum over colour channels.
   return seg_ids, sq
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1), donate_argnums=(7, 8))
-def _hessian_chunk(config, log2_res, params, rays, valid, lo, hi, total, comp):
+def sparse_kahan_add(total, comp, scratch, ids, vals):
+  """Adds vals at ids (repeats allowed) to a compensated accumulator, touching only ids.
+
+  The terms are first summed per vertex in float32 by a scatter-add into `scratch` (all
+  zeros outside a call), then each touched vertex's sum is added to (total, comp) with
+  kahan_add, and scratch is zeroed again at ids. Repeated ids gather the same values
+  and write the same results, so the outcome does not depend on the order of writes. Cost
+  is proportional to len(ids), not to the table size.
+
+  Args:
+    total, comp: [V, C] Kahan accumulator (see kahan_add). scratch: [V, C] zeros.
+    ids: [M] int32 rows. vals: [M, C] terms.
+
+  Returns:
+    (new total, new comp, scratch: zeros again).
+  """
+  scratch = scratch.at[ids].add(vals)
+  t, c = kahan_add(total[ids], comp[ids], scratch[ids])
+  return total.at[ids].set(t), comp.at[ids].set(c), scratch.at[ids].set(0.)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1), donate_argnums=(7, 8, 9))
+def _hessian_chunk(config, log2_res, params, rays, valid, lo, hi, total, comp, scratch):
   """Adds one chunk's sum of diag(J^T J) to the compensated accumulator.
 
   Args:
     config: static Config (stop_level_grad=True). log2_res: static L.
     params: field parameters. rays: Rays [B]. valid: [B] 1 real ray, 0 padding.
-    lo, hi: [3] box. total, comp: [V, 3] Kahan accumulator (donated).
+    lo, hi: [3] box. total, comp: [V, 3] Kahan accumulator; scratch: [V, 3] zeros (all
+      three donated).
 
   Returns:
-    (new total, new comp), as kahan_add.
+    (new total, new comp, scratch), as sparse_kahan_add.
   """
   n = 2**log2_res
   sens, means = sample_sensitivities(config, params, rays, valid)
   seg_ids, sq = per_ray_vertex_jtj(sens, means, lo, hi, n)
-  part = jnp.zeros(total.shape, jnp.float32).at[seg_ids].add(sq)
-  return kahan_add(total, comp, part)
+  return sparse_kahan_add(total, comp, scratch, seg_ids, sq)
+
+
+def balanced_chunk(num: int, chunk: int) -> int:
+  """The chunk size that covers num rays in as few chunks as `chunk` allows, evenly.
+
+  ceil(num / c) chunks of c = ceil(num / ceil(num / chunk)) rays: at most one padded
+  ray per chunk instead of up to chunk - 1 in the last one (8883 rays in chunks of 8192
+  would otherwise compute 16384).
+
+  Args:
+    num: rays in all (>= 1). chunk: the largest chunk allowed (>= 1).
+
+  Returns:
+    c, 1 <= c <= min(chunk, num).
+  """
+  chunks = -(-num // max(1, min(chunk, num)))
+  return -(-num // chunks)
 
 
 def _chunk_indices(num: int, start: int, chunk: int):
@@ -179,8 +216,9 @@ def hessian_diagonal(config, params, rays, lo, hi, log2_res: int, lam: float,
 
   Precision: each chunk's sum is accumulated in float32 by a scatter-add (at most
   chunk * levels * 8 S terms), and the chunk sums are added with Kahan compensated
-  summation in float32 on the device, so millions of rays neither overflow nor drop small
-  terms, and the [V, 3] accumulator never leaves the device.
+  summation in float32 on the device (sparse_kahan_add: only at the vertices the chunk
+  touches), so millions of rays neither overflow nor drop small terms, and the [V, 3]
+  accumulator never leaves the device.
 
   Args:
     config: Config. params: field parameters of the trained model.
@@ -188,7 +226,8 @@ def hessian_diagonal(config, params, rays, lo, hi, log2_res: int, lam: float,
     lo, hi: [3] box of the deformation grid (NDC cube for LLFF, scene box for Blender).
     log2_res: L; the grid has (2^L + 1)^3 vertices.
     lam: prior precision lambda > 0.
-    chunk: rays per jitted chunk (static; the last chunk is padded with zero weight).
+    chunk: the most rays per jitted chunk; the rays are split into as few chunks as
+      that allows, of equal size (balanced_chunk; the last is padded with zero weight).
     show_progress: draw a bar (rays, rate, ETA).
 
   Returns:
@@ -196,17 +235,18 @@ def hessian_diagonal(config, params, rays, lo, hi, log2_res: int, lam: float,
   """
   cfg = dataclasses.replace(config, stop_level_grad=True)
   num = int(rays.origins.shape[0])
-  chunk = max(1, min(chunk, num))
+  chunk = balanced_chunk(num, chunk)
   lo = jnp.asarray(lo, jnp.float32) * jnp.ones(3, jnp.float32)
   hi = jnp.asarray(hi, jnp.float32) * jnp.ones(3, jnp.float32)
   total = jnp.zeros((grid_size(log2_res), 3), jnp.float32)
   comp = jnp.zeros_like(total)
+  scratch = jnp.zeros_like(total)
   bar = progress_bar(total=num, desc='Hessian', disable=not show_progress, unit='ray')
   for start in range(0, num, chunk):
     idx, valid = _chunk_indices(num, start, chunk)
     part = jax.tree_util.tree_map(lambda x, idx=idx: jnp.take(x, idx, axis=0), rays)
-    total, comp = _hessian_chunk(cfg, log2_res, params, part, jnp.asarray(valid), lo, hi,
-                                 total, comp)
+    total, comp, scratch = _hessian_chunk(cfg, log2_res, params, part, jnp.asarray(valid),
+                                          lo, hi, total, comp, scratch)
     bar.update(int(valid.sum()))
   bar.close()
   return (2. / num) * (total - comp) + 2. * lam

@@ -222,6 +222,44 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   assert tree_files(out / 's') == before and (out / 's.md').read_text() == md
   sub_rows = json.loads((out / 't.json').read_text())['rows']['procedural']
   assert sub_rows['R1'] == {'0': rows['R1']['0']}
+  # --scenes_2x given with no scene: the finished B 2x runs are not tabulated.
+  sub = subprocess.run(cmd + ['--table', 'u', '--seeds', '0', '--scenes_2x'], cwd=REPO,
+                       capture_output=True, text=True, timeout=600, check=False)
+  assert sub.returncode == 0, sub.stderr[-3000:]
+  assert 'B 2x steps' not in json.loads((out / 'u.json').read_text())['rows']['procedural']
+  assert tree_files(out / 's') == before
+  bad = subprocess.run(cmd + ['--scenes_2x', 'fern'], cwd=REPO, capture_output=True,
+                       text=True, timeout=600, check=False)
+  assert bad.returncode == 2
+  assert 'error: --scenes_2x names fern, not in --scenes (procedural)' in bad.stderr
+  # --merge: tables made apart (here seed 0 and seed 1) give the full table's rows and
+  # summary, training nothing; tables of other settings or conflicting results fail.
+  sub = subprocess.run(cmd + ['--table', 'v', '--seeds', '1'], cwd=REPO, capture_output=True,
+                       text=True, timeout=600, check=False)
+  assert sub.returncode == 0, sub.stderr[-3000:]
+  merge = [sys.executable, 'experiments/renerf_scenes.py', '--name', 'w', '--out', str(out),
+           '--merge', str(out / 't.json'), str(out / 'v.json')]
+  sub = subprocess.run(merge, cwd=REPO, capture_output=True, text=True, timeout=600,
+                       check=False)
+  assert sub.returncode == 0, sub.stderr[-3000:]
+  merged = json.loads((out / 'w.json').read_text())
+  assert merged['rows'] == result['rows'] and merged['summary'] == result['summary']
+  assert merged['seeds'] == [0, 1] and len(merged['sources']) == 2
+  assert 'Merged from the tables of:' in (out / 'w.md').read_text()
+  assert tree_files(out / 's') == before
+  other = json.loads((out / 'v.json').read_text())
+  other['command'] += ' --gin_bindings=Config.lr_init=1.0'
+  (out / 'other.json').write_text(json.dumps(other))
+  clash = json.loads((out / 'v.json').read_text())
+  clash['rows']['procedural']['R1']['1']['psnr'] += 1.
+  (out / 'clash.json').write_text(json.dumps(clash))
+  for extra, message in ((['other.json'], 'other.json was made with --config/--gin_bindings'),
+                         (['clash.json'], 'another result for procedural / R1 / seed 1'),
+                         (['missing.json'], 'missing.json is not a renerf_scenes table')):
+    bad = subprocess.run(merge + [str(out / e) for e in extra], cwd=REPO,
+                         capture_output=True, text=True, timeout=300, check=False)
+    assert bad.returncode != 0 and message in bad.stderr, bad.stderr[-2000:]
+    assert 'Traceback' not in bad.stderr
 
 
 def test_equal_time_comparison_takes_given_idle_rates_and_per_method_seeds(tmp_path):

@@ -10,6 +10,7 @@ from dense_reference import reference_hessian_diagonals
 from tiny_scene import LAM, take, tiny_setup
 
 from renerf_jax import laplace, uncertainty
+from renerf_jax.deformation import trilinear_corners
 from renerf_jax.model import render_rays
 
 
@@ -29,7 +30,64 @@ def test_kahan_keeps_small_terms():
   np.testing.assert_allclose(float(total - comp), 1.0001, rtol=1e-6)  # ... Kahan does not.
 
 
-HESSIAN_RAYS = [5, 70, 140, 210, 333, 500]  # 6 rays; with chunk 4 one chunk is padded.
+HESSIAN_RAYS = [5, 70, 140, 210, 333, 420, 500]  # 7 rays: 2 chunks of 4, one ray padded.
+
+
+@pytest.mark.parametrize('num,chunk,want', [(8883, 8192, 4442), (7, 4, 4), (6, 4, 3),
+                                            (5, 100, 5), (1, 1, 1), (1024, 1024, 1024),
+                                            (1025, 1024, 513)])
+def test_balanced_chunk_covers_the_rays_in_fewest_even_chunks(num, chunk, want):
+  c = laplace.balanced_chunk(num, chunk)
+  assert c == want
+  chunks = -(-num // c)
+  assert chunks == -(-num // min(chunk, num))  # As few chunks as the cap allows...
+  assert chunks * c - num < chunks  # ... with less than one padded ray per chunk.
+
+
+def test_per_ray_sums_match_a_dense_per_ray_jacobian():
+  # Rays as lines through a 4^3 grid: consecutive samples share cells and vertices, so
+  # a vertex's contributions must be summed within the ray before squaring.
+  key = jax.random.split(jax.random.PRNGKey(3), 4)
+  levels, b, s, n = 2, 5, 9, 4
+  o = jax.random.uniform(key[0], (b, 3), minval=-1., maxval=1.)
+  d = jax.random.normal(key[1], (b, 3))
+  t = jnp.sort(jax.random.uniform(key[2], (levels, b, s)), axis=-1)
+  means = o[None, :, None] + t[..., None] * d[None, :, None]  # Some leave the box.
+  sens = jax.random.normal(key[3], (3, levels, b, s, 3))
+  ids, sq = laplace.per_ray_vertex_jtj(sens, means, -1., 1., n)
+  got = np.zeros(((n + 1)**3, 3))
+  np.add.at(got, np.asarray(ids), np.asarray(sq, np.float64))
+  cid, w = (np.asarray(x) for x in trilinear_corners(means, -1., 1., n))
+  want = np.zeros_like(got)
+  for lv in range(levels):
+    for r in range(b):
+      jac = np.zeros((3, (n + 1)**3, 3))  # [channel, vertex, axis] of this ray and level
+      for i in range(s):
+        for c in range(8):
+          jac[:, cid[lv, r, i, c], :] += w[lv, r, i, c] * np.asarray(sens[:, lv, r, i, :])
+      want += np.sum(jac**2, axis=0)
+  assert np.sum(want > 0) > 50
+  np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
+
+
+def test_sparse_kahan_add_touches_only_ids_and_sums_repeats():
+  total = jnp.array([[1.], [2.], [3.], [4.]], jnp.float32)
+  comp = jnp.zeros_like(total)
+  scratch = jnp.zeros_like(total)
+  ids = jnp.array([2, 0, 2, 2, 0], jnp.int32)  # Repeats, unordered; rows 1 and 3 untouched.
+  vals = jnp.array([[1e-8], [0.5], [1e-8], [1e-8], [0.25]], jnp.float32)
+  t, c, scratch = laplace.sparse_kahan_add(total, comp, scratch, ids, vals)
+  np.testing.assert_array_equal(np.asarray(scratch), 0.)  # Ready for the next chunk.
+  np.testing.assert_allclose(np.asarray(t - c)[:, 0], [1.75, 2., 3. + 3e-8, 4.], rtol=1e-7)
+  np.testing.assert_array_equal(np.asarray(t)[[1, 3]], [[2.], [4.]])
+  # Kahan across calls: 10^4 terms of 1e-8 onto 1.0 are not lost.
+  step = jax.jit(laplace.sparse_kahan_add)
+  one = (jnp.ones((2, 1)), jnp.zeros((2, 1)), jnp.zeros((2, 1)))
+  ids, vals = jnp.array([1], jnp.int32), jnp.full((1, 1), 1e-8, jnp.float32)
+  for _ in range(10000):
+    one = step(*one, ids, vals)
+  assert float(one[0][1, 0] - one[1][1, 0]) == pytest.approx(1.0001, rel=1e-6)
+  assert float(one[0][0, 0]) == 1.
 
 
 def test_hessian_diagonal_matches_jax_hessian(setup):
