@@ -30,7 +30,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import laplace, report
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_throughput import time_calls  # pylint: disable=g-import-not-at-top
+from renerf_jax import laplace, report  # pylint: disable=g-import-not-at-top
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.deformation import grid_size, trilinear_corners
@@ -103,20 +105,14 @@ def chunk_parts(config, params, rays, lo, hi, log2_res, chunk, repeats):
   acc_fn = jax.jit(laplace.sparse_kahan_add, donate_argnums=(0, 1, 2))
   table = lambda: jnp.zeros((grid_size(log2_res), 3), jnp.float32)
 
-  def best(fn, *args):
-    out = jax.block_until_ready(fn(*args))
-    t = float('inf')
-    for _ in range(repeats):
-      t0 = time.perf_counter()
-      jax.block_until_ready(fn(*args))
-      t = min(t, time.perf_counter() - t0)
-    return t, out
-
-  t_fwd, _ = best(forward, params, part)
-  t_sens, (sens, means) = best(sens_fn, params, part)
-  t_sums, (ids, sq) = best(sums_fn, sens, means)
-  t_acc, _ = best(lambda i, v: acc_fn(table(), table(), table(), i, v), ids, sq)
-  t_tables, _ = best(lambda: (table(), table(), table()))
+  best = lambda fn: time_calls(fn, repeats, reduce=min)
+  sens, means = sens_fn(params, part)
+  ids, sq = sums_fn(sens, means)
+  t_fwd = best(lambda: forward(params, part))
+  t_sens = best(lambda: sens_fn(params, part))
+  t_sums = best(lambda: sums_fn(sens, means))
+  t_acc = best(lambda: acc_fn(table(), table(), table(), ids, sq))
+  t_tables = best(lambda: (table(), table(), table()))
   return {'rays': b, 'forward_s': t_fwd, 'sensitivities_s': t_sens,
           'per_ray_sums_s': t_sums, 'accumulate_s': max(t_acc - t_tables, 0.)}
 

@@ -40,9 +40,10 @@ from renerf_jax.rendering import _render_chunk
 from renerf_jax.renerf import make_pools
 
 
-def time_calls(fn, repeats, warmups=1):
-  """Median seconds of `repeats` calls of fn() after `warmups` calls (the second call of
-  a step that donates its state can compile again for the returned arrays' layout)."""
+def time_calls(fn, repeats, warmups=1, reduce=np.median):
+  """Median (or `reduce`, e.g. min) seconds of `repeats` calls of fn() after `warmups`
+  calls (the second call of a step that donates its state can compile again for the
+  returned arrays' layout)."""
   for _ in range(warmups):
     jax.block_until_ready(fn())
   times = []
@@ -50,7 +51,7 @@ def time_calls(fn, repeats, warmups=1):
     t = time.perf_counter()
     jax.block_until_ready(fn())
     times.append(time.perf_counter() - t)
-  return float(np.median(times))
+  return float(reduce(times))
 
 
 def xla_cost(compiled):

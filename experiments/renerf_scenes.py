@@ -37,7 +37,6 @@ names them otherwise).
 """
 import argparse
 import dataclasses
-import json
 import os
 import shlex
 import sys
@@ -111,8 +110,7 @@ def merged_rows(paths):
   rows, seeds, commands, setting = {}, [], [], None
   for path in paths:
     try:
-      with open(path, encoding='utf-8') as f:
-        table = json.load(f)
+      table = report.read_json(path)
       src = parser().parse_args(shlex.split(table['command'])[2:])
       table_rows = table['rows']
     except (OSError, ValueError, KeyError, SystemExit) as e:
