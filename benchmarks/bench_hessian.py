@@ -32,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_throughput import time_calls  # pylint: disable=g-import-not-at-top
-from renerf_jax import laplace, report  # pylint: disable=g-import-not-at-top
+from renerf_jax import laplace, model, report  # pylint: disable=g-import-not-at-top
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.deformation import grid_size, trilinear_corners
@@ -98,7 +98,7 @@ def chunk_parts(config, params, rays, lo, hi, log2_res, chunk, repeats):
   b = int(part.origins.shape[0])
   valid = jnp.ones((b,), jnp.float32)
   lo, hi = jnp.asarray(lo, jnp.float32), jnp.asarray(hi, jnp.float32)
-  zeros = jnp.zeros((cfg.num_levels, b, cfg.num_samples, 3), jnp.float32)
+  zeros = jnp.zeros((model.colour_levels(cfg), b, cfg.num_samples, 3), jnp.float32)
   forward = jax.jit(lambda p, r: laplace._render_level_rgb(cfg, p, r, zeros))  # pylint: disable=protected-access
   sens_fn = jax.jit(lambda p, r: laplace.sample_sensitivities(cfg, p, r, valid))
   sums_fn = jax.jit(lambda s, m: laplace.per_ray_vertex_jtj(s, m, lo, hi, 2**log2_res))
@@ -161,7 +161,7 @@ def bench_config(path, bindings, n_rays, chunk, log2_res, repeats):
       'rays': n_rays, 'chunk': chunk,
       'rays_computed_previous': -(-n_rays // min(chunk, n_rays)) * min(chunk, n_rays),
       'rays_computed_today': -(-n_rays // balanced) * balanced, 'log2_res': log2_res,
-      'vertices': grid_size(log2_res), 'samples': f'{config.num_levels}x{config.num_samples}',
+      'vertices': grid_size(log2_res), 'samples': model.samples_label(config),
       'first_call_s_previous': first['previous'], 'first_call_s_today': first['today'],
       's_previous': best['previous'], 's_today': best['today'],
       'rays_per_s_previous': n_rays / best['previous'],

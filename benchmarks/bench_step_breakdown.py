@@ -4,7 +4,7 @@ python benchmarks/bench_step_breakdown.py --configs experiments/configs/table_co
     gin_configs/llff3_fast.gin
 
 For each config, on the same batch shapes as training.train_step (batch rays + random-
-pose patch rays, num_levels x num_samples samples a ray), each part is jitted on its own
+pose patch rays, model.level_samples samples a ray), each part is jitted on its own
 and timed (median of --repeats after a warm-up):
 
   step          the whole training.train_step;
@@ -13,6 +13,9 @@ and timed (median of --repeats after a warm-up):
   encode+grad   the grid encoding alone (normalise, indices, one gather, trilinear
                 weights) and its gradient, for every sample of a step;
   mlps+grad     the density and colour MLPs alone on those samples' features;
+  proposal+grad the proposal field and its gradient at the proposal samples of a step
+                (Config.sampler = 'proposal' only; the grid parts then count the fine
+                samples only);
   adam          the optimiser update of all parameters.
 
 The parts overlap (render+grad contains encode and mlps), so they are not meant to sum
@@ -34,10 +37,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from bench_throughput import time_calls, xla_cost  # pylint: disable=g-import-not-at-top
-from renerf_jax import mip, regularizers, report, training  # pylint: disable=g-import-not-at-top
+from renerf_jax import mip, model, regularizers, report, training  # pylint: disable=g-import-not-at-top
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.fields import make_field
+from renerf_jax.fields.proposal import make_proposal
 from renerf_jax.renerf import make_pools
 
 
@@ -80,26 +84,36 @@ def parts(config, repeats):
     return regularizers.depth_tv(levels[-1]['distance'].reshape(patches.origins.shape[:3]))
   add('patch+grad', jax.value_and_grad(patch_loss), state.params, k_render)
 
+  rays = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), batch['rays'], flat)
   if config.field == 'grid':
     field = make_field(config)
+    field_params = {'params': state.params['params']}
     # The samples of a step: the coarse samples of its batch and patch rays, once per level
-    # (the fine samples lie on the same rays), so that the gather sees ray-coherent points.
-    rays = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), batch['rays'], flat)
+    # that evaluates the scene field (the fine samples lie on the same rays), so that the
+    # gather sees ray-coherent points.
     _, (means, covs) = mip.sample_along_rays(
         key, rays.origins, rays.directions, rays.radii, config.num_samples, rays.near,
         rays.far, True, config.lindisp, config.ray_shape)
-    means = jnp.tile(means.reshape(-1, 3), (config.num_levels, 1))
-    covs = jnp.tile(covs.reshape(-1, 3), (config.num_levels, 1))
+    means = jnp.tile(means.reshape(-1, 3), (model.colour_levels(config), 1))
+    covs = jnp.tile(covs.reshape(-1, 3), (model.colour_levels(config), 1))
     n = means.shape[0]
     enc = lambda p, m: jnp.sum(field.apply(p, m, covs, method=field.encode)**2)
-    add('encode+grad', jax.value_and_grad(enc), state.params, means)
-    feats = field.apply(state.params, means, covs, method=field.encode)
+    add('encode+grad', jax.value_and_grad(enc), field_params, means)
+    feats = field.apply(field_params, means, covs, method=field.encode)
     viewdirs = jnp.zeros((n, 3)).at[:, 2].set(-1.)
 
     def mlps(p, f):
       rgb, dens = field.apply(p, f[:, None], viewdirs, method=field.decode)
       return jnp.sum(rgb**2) + jnp.sum(dens**2)
-    add('mlps+grad', jax.value_and_grad(mlps), state.params, feats)
+    add('mlps+grad', jax.value_and_grad(mlps), field_params, feats)
+  if config.sampler == 'proposal':
+    proposal = make_proposal(config)
+    _, (p_means, _) = mip.sample_along_rays(
+        key, rays.origins, rays.directions, rays.radii, config.proposal_samples,
+        rays.near, rays.far, True, config.lindisp, config.ray_shape)
+    prop = lambda p, m: jnp.sum(proposal.apply({'params': p}, m)**2)
+    add('proposal+grad', jax.value_and_grad(prop), state.params['proposal'],
+        p_means.reshape(-1, 3))
 
   opt = training.make_optimizer(config)
   grads = jax.tree_util.tree_map(jnp.ones_like, state.params)

@@ -32,7 +32,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # pylint: disable=g-import-not-at-top
 from benchmarks.bench_train_step import matmul_gflops
-from renerf_jax import deformation, laplace, report, training
+from renerf_jax import deformation, laplace, model, report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.fields import init_field_params
@@ -72,10 +72,10 @@ def _compile(jitted, *args):
 
 def _row(config, stage, rays, sec, gflop, compile_s):
   return {'stage': stage, 'rays': int(rays), 'sec_per_call': sec, 'rays_per_s': rays / sec,
-          'samples_per_s': rays * config.num_samples * config.num_levels / sec,
+          'samples_per_s': rays * sum(model.level_samples(config)) / sec,
           'gflop_per_call': gflop, 'achieved_gflops': gflop / sec, 'compile_s': compile_s,
           'field': config.field,
-          'samples': f'{config.num_levels}x{config.num_samples}'}
+          'samples': model.samples_label(config)}
 
 
 def bench_train(config, scene, repeats, at_fraction=0.):
@@ -124,7 +124,9 @@ def bench_hessian(config, scene, rays, params, chunk, repeats):
 
 
 def bench_config(path, bindings, repeats, hessian_chunk, stages, train_at=0.):
-  config = load_config([path], bindings)
+  """Rows of one config; `path` is a gin file or several joined by commas (a base and
+  its modifiers, e.g. gin_configs/llff3_fast.gin,gin_configs/modifiers/no_anneal.gin)."""
+  config = load_config(path.split(','), bindings)
   scene = load_scene(config)
   hessian_chunk = hessian_chunk or config.hessian_chunk
   pool = ray_pool(scene, scene.train_idx)['rays']
@@ -140,7 +142,7 @@ def bench_config(path, bindings, repeats, hessian_chunk, stages, train_at=0.):
   if 'hessian' in stages:
     rows.append(bench_hessian(config, scene, rays, params, hessian_chunk, repeats))
   for row in rows:
-    row['config'] = os.path.basename(path)
+    row['config'] = '+'.join(os.path.basename(p) for p in path.split(','))
     print(row, flush=True)
   return rows
 

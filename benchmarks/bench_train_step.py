@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from renerf_jax import report, training  # pylint: disable=g-import-not-at-top
+from renerf_jax import model, report, training  # pylint: disable=g-import-not-at-top
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import make_pools
@@ -57,7 +57,7 @@ def bench(config_path, bindings, steps):
     times.append(time.perf_counter() - t)
   sec = float(np.median(times))
   rays = config.batch_size + (config.batch_size_random if config.depth_tv_loss_mult > 0 else 0)
-  samples = rays * config.num_samples * config.num_levels
+  samples = rays * sum(model.level_samples(config))
   return {'config': os.path.basename(config_path), 'bindings': ' '.join(bindings),
           'compile_s': compile_s, 'sec_per_step': sec, 'rays_per_s': rays / sec,
           'samples_per_s': samples / sec, 'step_gflop': flops / 1e9,

@@ -141,6 +141,18 @@ class Config:
   grid_init_scale: float = 1e-4  # Uniform init range of the tables.
   grid_box: Tuple[Tuple[float, ...], Tuple[float, ...]] = ((-1., -1., -1.), (1., 1., 1.))
   # Box the grid covers: the NDC cube for LLFF; about +-1.5 for NeRF-synthetic.
+  # --- sampler ---
+  sampler: str = 'coarse_fine'
+  # 'coarse_fine' (mip-NeRF: every level renders colour with the one field, the coarse
+  # level weighted by coarse_loss_mult) or 'proposal' (mip-NeRF 360 / nerfacto: level 0
+  # samples a tiny density-only grid, fields/proposal.py, trained by the interlevel loss;
+  # only the last level renders colour). 'proposal' needs num_levels = 2.
+  proposal_samples: int = 64  # Samples of the proposal level ('proposal' only).
+  proposal_levels: int = 5  # Grid levels of the proposal field (grid_base_res upwards).
+  proposal_max_res: int = 128  # Its finest resolution.
+  proposal_log2_hashmap_size: int = 17  # Its entries per level when hashed (2^n).
+  proposal_mlp_width: int = 16  # Hidden width of its density MLP.
+  interlevel_loss_mult: float = 1.  # Weight of the proposal's interlevel loss.
   # --- Re-Nerfing ---
   num_rounds: int = _f(0, 'rounds')
   # Re-Nerfing rounds after the baseline (0: baseline only).
@@ -214,6 +226,16 @@ class Config:
     _check(self.density_activation in ('softplus', 'exp'),
            f'Config.density_activation={self.density_activation!r} (softplus or exp)')
     _check(self.field in ('mlp', 'grid'), f'Config.field={self.field!r} (mlp or grid)')
+    _check(self.sampler in ('coarse_fine', 'proposal'),
+           f'Config.sampler={self.sampler!r} (coarse_fine or proposal)')
+    _check(self.sampler != 'proposal' or self.num_levels == 2,
+           f'Config.sampler=\'proposal\' needs Config.num_levels = 2 (one proposal '
+           f'level, then the scene field), got {self.num_levels}')
+    _check(self.sampler != 'proposal' or self.stop_level_grad,
+           'Config.sampler=\'proposal\' needs Config.stop_level_grad = True (the '
+           'proposal is trained by the interlevel loss alone)')
+    _check(self.proposal_samples >= 2,
+           f'Config.proposal_samples={self.proposal_samples} must be >= 2')
     _check(self.pseudo_schedule in ('early', 'all', 'late'),
            f'Config.pseudo_schedule={self.pseudo_schedule!r} (early, all or late)')
     _check(self.renerf_init in ('reset', 'continue'),

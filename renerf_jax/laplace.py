@@ -10,7 +10,10 @@ Conventions (the vertex grid and clamping are renerf_jax.deformation's):
   * Hessian: diag(H) = 2 / R sum_r sum_levels diag(J_r^T J_r) + 2 lambda, J_r the Jacobian
     of ray r's rendered rgb [3] of one level w.r.t. theta at theta = 0. Coarse and fine
     levels count separately (their J^T J are added); the fine sample positions are held
-    fixed (stop-gradient w.r.t. the coarse weights, as in mip-NeRF training).
+    fixed (stop-gradient w.r.t. the coarse weights, as in mip-NeRF training). With the
+    proposal sampler (Config.sampler = 'proposal') only the fine level renders colour,
+    so the sum has one level: the diagonal is about half the coarse-to-fine one, and a
+    hessian_lambda or mask threshold chosen for two levels weighs twice as much.
   * Sigma = 1 / diag(H) per axis; a vertex's sigma is the L2 norm of its per-axis standard
     deviations, sqrt(Sigma_x + Sigma_y + Sigma_z). A vertex no ray sees has the prior
     sigma sqrt(3 / (2 lambda)).
@@ -25,7 +28,7 @@ import numpy as np
 
 from renerf_jax import mip
 from renerf_jax.deformation import grid_size, trilinear_corners
-from renerf_jax.model import render_rays
+from renerf_jax.model import colour_levels, render_rays
 from renerf_jax.progress import progress_bar
 
 
@@ -51,17 +54,23 @@ def kahan_add(total, comp, x):
 
 
 def _render_level_rgb(config, params, rays, deltas):
-  """Renders rays with a per-sample offset added to every level's sample means.
+  """Renders rays with a per-sample offset added to the sample means of every level that
+  renders colour.
 
   Args:
     config: Config. params: field parameters. rays: Rays [B].
-    deltas: [num_levels, B, S, 3] offsets (level l's are added to level l's means).
+    deltas: [colour levels, B, S, 3] offsets, one per level that renders colour
+      (model.colour_levels: with the proposal sampler, the fine level only; the proposal
+      samples are not deformed: the fine positions are held fixed w.r.t. them anyway).
 
   Returns:
-    (rgb [num_levels, B, 3], t_vals [num_levels, B, S + 1]).
+    (rgb [colour levels, B, 3], t_vals [colour levels, B, S + 1]).
   """
+  first = config.num_levels - colour_levels(config)
+  offsets = lambda level, means: (deltas[level - first] if level >= first
+                                  else jnp.zeros_like(means))
   levels = render_rays(config, params, rays, jax.random.PRNGKey(0), train=False,
-                       offsets=lambda level, means: deltas[level])
+                       offsets=offsets)[first:]
   return (jnp.stack([lv['rgb'] for lv in levels]),
           jnp.stack([lv['t_vals'] for lv in levels]))
 
@@ -79,16 +88,17 @@ def sample_sensitivities(config, params, rays, valid):
     valid: [B] 1 for real rays, 0 for padding (its sensitivities are 0).
 
   Returns:
-    (sens [3 (channel), num_levels, B, S, 3 (axis)] = d rgb_{l,b,c} / d x_{l,b,s,a},
-     means [num_levels, B, S, 3] the undeformed sample means).
+    (sens [3 (channel), levels, B, S, 3 (axis)] = d rgb_{l,b,c} / d x_{l,b,s,a},
+     means [levels, B, S, 3] the undeformed sample means), over the levels that render
+    colour (model.colour_levels).
   """
   b = rays.origins.shape[0]
-  deltas = jnp.zeros((config.num_levels, b, config.num_samples, 3), jnp.float32)
+  deltas = jnp.zeros((colour_levels(config), b, config.num_samples, 3), jnp.float32)
   fn = functools.partial(_render_level_rgb, config, params, rays)
   _, vjp_fn, t_vals = jax.vjp(fn, deltas, has_aux=True)
   sens = []
   for c in range(3):
-    cot = jnp.zeros((config.num_levels, b, 3), jnp.float32).at[:, :, c].set(valid)
+    cot = jnp.zeros((colour_levels(config), b, 3), jnp.float32).at[:, :, c].set(valid)
     sens.append(vjp_fn(cot)[0])
   means, _ = mip.cast_rays(t_vals, rays.origins, rays.directions, rays.radii,
                            config.ray_shape)

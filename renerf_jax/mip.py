@@ -208,7 +208,7 @@ def sorted_piecewise_constant_pdf(key, bins, weights, num_samples, randomized):
 
 
 def resample_along_rays(key, origins, directions, radii, t_vals, weights, randomized,
-                        ray_shape, stop_grad, resample_padding):
+                        ray_shape, stop_grad, resample_padding, num_samples=None):
   """mip-NeRF hierarchical resampling with the 2-tap max, 2-tap blur and padding.
 
   Args:
@@ -217,16 +217,17 @@ def resample_along_rays(key, origins, directions, radii, t_vals, weights, random
     randomized: jitter. ray_shape: 'cone' or 'cylinder'.
     stop_grad: no gradient through the new t_vals.
     resample_padding: constant added to the blurred weights.
+    num_samples: samples of the new level, N (default S, as many as the previous).
 
   Returns:
-    (new t_vals [..., S + 1], (means, cov_diags) each [..., S, 3]).
+    (new t_vals [..., N + 1], (means, cov_diags) each [..., N, 3]).
   """
   weights_pad = jnp.concatenate([weights[..., :1], weights, weights[..., -1:]], axis=-1)
   weights_max = jnp.maximum(weights_pad[..., :-1], weights_pad[..., 1:])
   weights_blur = 0.5 * (weights_max[..., :-1] + weights_max[..., 1:])
   weights = weights_blur + resample_padding
-  new_t_vals = sorted_piecewise_constant_pdf(key, t_vals, weights, t_vals.shape[-1],
-                                             randomized)
+  n_edges = t_vals.shape[-1] if num_samples is None else num_samples + 1
+  new_t_vals = sorted_piecewise_constant_pdf(key, t_vals, weights, n_edges, randomized)
   if stop_grad:
     new_t_vals = jax.lax.stop_gradient(new_t_vals)
   return new_t_vals, cast_rays(new_t_vals, origins, directions, radii, ray_shape)
@@ -249,6 +250,22 @@ def volumetric_rendering(rgb, density, t_vals, directions, white_bkgd):
     normalised by acc; t_far for rays with acc ~ 0, clipped to [t_near, t_far]),
     acc [...] (opacity) and weights [..., S].
   """
+  out = volumetric_weights(density, t_vals, directions)
+  comp_rgb = jnp.sum(out['weights'][..., None] * rgb, axis=-2)
+  if white_bkgd:
+    comp_rgb = comp_rgb + (1. - out['acc'][..., None])
+  return dict(rgb=comp_rgb, **out)
+
+
+def volumetric_weights(density, t_vals, directions):
+  """The colour-free part of volumetric_rendering: weights, opacity and distance.
+
+  Args:
+    density: [..., S] >= 0. t_vals: [..., S + 1]. directions: [..., 3].
+
+  Returns:
+    dict with distance [...], acc [...] and weights [..., S] (see volumetric_rendering).
+  """
   t_mids = 0.5 * (t_vals[..., :-1] + t_vals[..., 1:])
   t_dists = t_vals[..., 1:] - t_vals[..., :-1]
   delta = t_dists * jnp.linalg.norm(directions[..., None, :], axis=-1)
@@ -258,12 +275,9 @@ def volumetric_rendering(rgb, density, t_vals, directions, white_bkgd):
       [jnp.zeros_like(density_delta[..., :1]),
        jnp.cumsum(density_delta[..., :-1], axis=-1)], axis=-1))
   weights = alpha * trans
-  comp_rgb = jnp.sum(weights[..., None] * rgb, axis=-2)
   acc = jnp.sum(weights, axis=-1)
   ok = acc > 1e-6
   distance = jnp.where(ok, jnp.sum(weights * t_mids, axis=-1) / jnp.where(ok, acc, 1.),
                        t_vals[..., -1])
   distance = jnp.clip(distance, t_vals[..., 0], t_vals[..., -1])
-  if white_bkgd:
-    comp_rgb = comp_rgb + (1. - acc[..., None])
-  return dict(rgb=comp_rgb, distance=distance, acc=acc, weights=weights)
+  return dict(distance=distance, acc=acc, weights=weights)

@@ -6,6 +6,7 @@ import jax.numpy as jnp
 
 from renerf_jax import mip
 from renerf_jax.fields import make_field
+from renerf_jax.fields.proposal import make_proposal
 
 # Per-level sample offsets: (level, means [B, S, 3]) -> offsets [B, S, 3].
 OffsetFn = Callable[[int, jnp.ndarray], jnp.ndarray]
@@ -66,11 +67,16 @@ def materialize(tree):
 def render_rays(config, params, rays, key, train: bool,
                 feature_mask: Optional[jnp.ndarray] = None,
                 offsets: Optional[OffsetFn] = None) -> List[dict]:
-  """Renders rays with num_levels levels (coarse, then resampled fine) sharing one field.
+  """Renders rays with num_levels levels (coarse, then resampled fine).
+
+  With Config.sampler = 'coarse_fine' (mip-NeRF) every level evaluates the one scene
+  field; with 'proposal' level 0 evaluates the proposal field (density only) and level 1
+  the scene field at the samples resampled from the proposal's weights.
 
   Args:
     config: static Config (sampling, field and output settings).
-    params: field parameters.
+    params: field parameters (fields.init_field_params: {'params'}, plus 'proposal' with
+      the proposal sampler).
     rays: cameras.Rays with leading shape [B].
     key: PRNG key (stratified jitter, density noise); unused at eval.
     train: training mode (randomised sampling if config.randomized, density noise).
@@ -82,33 +88,68 @@ def render_rays(config, params, rays, key, train: bool,
 
   Returns:
     One dict per level: rgb [B, 3], distance [B], acc [B], weights [B, S], t_vals [B, S+1],
-    density [B, S].
+    density [B, S]. With Config.sampler = 'proposal' level 0 is the proposal's (S =
+    proposal_samples) and has no 'rgb' (colour_levels gives the levels that have it).
   """
   field = make_field(config)
+  proposal = config.sampler == 'proposal'
+  field_vars = {'params': params['params']} if proposal else params
   randomized = train and config.randomized
   results = []
   t_vals = weights = None
   for level in range(config.num_levels):
     key, k_sample, k_noise = jax.random.split(key, 3)
     if level == 0:
+      n = config.proposal_samples if proposal else config.num_samples
       t_vals, (means, covs) = mip.sample_along_rays(
-          k_sample, rays.origins, rays.directions, rays.radii, config.num_samples,
+          k_sample, rays.origins, rays.directions, rays.radii, n,
           rays.near, rays.far, randomized, config.lindisp, config.ray_shape)
     else:
       t_vals, (means, covs) = mip.resample_along_rays(
           k_sample, rays.origins, rays.directions, rays.radii, t_vals, weights, randomized,
-          config.ray_shape, config.stop_level_grad, config.resample_padding)
+          config.ray_shape, config.stop_level_grad, config.resample_padding,
+          config.num_samples)
     if offsets is not None:
       means = means + offsets(level, means)
     means, covs = materialize((means, covs))
-    raw_rgb, raw_density = field.apply(params, means, covs, rays.viewdirs, feature_mask)
-    if train and config.density_noise > 0:
+    if proposal and level == 0:
+      raw_density = make_proposal(config).apply({'params': params['proposal']}, means)
+      raw_rgb = None
+    else:
+      raw_rgb, raw_density = field.apply(field_vars, means, covs, rays.viewdirs,
+                                         feature_mask)
+    if train and config.density_noise > 0 and raw_rgb is not None:
       raw_density = raw_density + config.density_noise * jax.random.normal(
           k_noise, raw_density.shape)
-    rgb, density = raw_to_outputs(raw_rgb, raw_density, config.rgb_padding,
+    if raw_rgb is None:
+      _, density = raw_to_outputs(0., raw_density, config.rgb_padding,
                                   config.density_bias, config.density_activation)
-    out = mip.volumetric_rendering(rgb, density, t_vals, rays.directions, config.white_bkgd)
+      out = mip.volumetric_weights(density, t_vals, rays.directions)
+    else:
+      rgb, density = raw_to_outputs(raw_rgb, raw_density, config.rgb_padding,
+                                    config.density_bias, config.density_activation)
+      out = mip.volumetric_rendering(rgb, density, t_vals, rays.directions,
+                                     config.white_bkgd)
     out.update(t_vals=t_vals, density=density)
     weights = out['weights']
     results.append(out)
   return results
+
+
+def level_samples(config):
+  """Samples per ray of each of render_rays' levels (the proposal level first)."""
+  return tuple(config.proposal_samples if config.sampler == 'proposal' and level == 0
+               else config.num_samples for level in range(config.num_levels))
+
+
+def samples_label(config) -> str:
+  """Samples per ray as a table label: '2x48' (coarse-to-fine) or '64p+48' (proposal)."""
+  if config.sampler == 'proposal':
+    return f'{config.proposal_samples}p+{config.num_samples}'
+  return f'{config.num_levels}x{config.num_samples}'
+
+
+def colour_levels(config) -> int:
+  """How many of render_rays' levels (the last ones) render colour: all of them with
+  the coarse-to-fine sampler, only the last with the proposal sampler."""
+  return 1 if config.sampler == 'proposal' else config.num_levels

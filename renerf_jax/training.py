@@ -20,7 +20,8 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from renerf_jax import cameras, metrics, regularizers, rundir
 from renerf_jax.configs import pseudo_steps
 from renerf_jax.fields import frequency_mask, init_field_params
-from renerf_jax.model import render_rays
+from renerf_jax.fields.proposal import interlevel_loss
+from renerf_jax.model import colour_levels, render_rays
 from renerf_jax.progress import progress_bar
 
 
@@ -61,12 +62,20 @@ def learning_rate(step, config):
 
 
 def make_optimizer(config):
-  """Clip by value, clip by global norm, Adam, RegNeRF's schedule."""
+  """Clip by value, clip by global norm, Adam, RegNeRF's schedule.
+
+  With the proposal sampler the clipping acts on the scene field's gradient only: the
+  proposal's (from the interlevel loss alone) neither enters the global norm nor is
+  clipped, so its scale cannot shrink the scene field's steps.
+  """
   parts = []
   if config.grad_max_val > 0:
     parts.append(optax.clip(config.grad_max_val))
   if config.grad_max_norm > 0:
     parts.append(optax.clip_by_global_norm(config.grad_max_norm))
+  if parts and config.sampler == 'proposal':
+    parts = [optax.masked(optax.chain(*parts),
+                          lambda params: {k: k == 'params' for k in params})]
   parts.append(optax.adam(functools.partial(learning_rate, config=config),
                           eps=config.adam_eps))
   return optax.chain(*parts)
@@ -196,7 +205,7 @@ def loss_fn(params, config, cam, batch, patches, step, key):
   """Total loss and statistics for one batch.
 
   Args:
-    params: field parameters. config, cam: static.
+    params: field parameters (fields.init_field_params). config, cam: static.
     batch: {'rays' Rays [B], 'rgb' [B, 3], 'lossmult' [B, 1]}.
     patches: Rays [P, ps, ps] from random poses, or None (depth TV off).
     step: scalar step. key: PRNG key.
@@ -208,9 +217,16 @@ def loss_fn(params, config, cam, batch, patches, step, key):
   feature_mask = _feature_mask(step, config)
   rays = _anneal(batch['rays'], step, config) if config.anneal_nearfar else batch['rays']
   levels = render_rays(config, params, rays, k_main, train=True, feature_mask=feature_mask)
-  mses = [masked_mse(lv['rgb'], batch['rgb'], batch['lossmult']) for lv in levels]
+  mses = [masked_mse(lv['rgb'], batch['rgb'], batch['lossmult'])
+          for lv in levels[-colour_levels(config):]]
   loss = mses[-1] + config.coarse_loss_mult * sum(mses[:-1])
   stats = {'mse': mses[-1], 'psnr': metrics.mse_to_psnr(mses[-1])}
+  if config.sampler == 'proposal':
+    fine = levels[-1]
+    inter = interlevel_loss(fine['t_vals'], fine['weights'], levels[0]['t_vals'],
+                            levels[0]['weights'])
+    loss = loss + config.interlevel_loss_mult * inter
+    stats['interlevel'] = inter
   if patches is not None:
     flat = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[3:]), patches)
     if config.anneal_nearfar:
@@ -229,7 +245,7 @@ def loss_fn(params, config, cam, batch, patches, step, key):
     stats.update(depth_tv=tv, depth_tv_weight=weight)
   if config.occ_reg_mult > 0:
     occ = sum(regularizers.occlusion_loss(lv['density'], config.occ_reg_range)
-              for lv in levels)
+              for lv in levels[-colour_levels(config):])
     loss = loss + config.occ_reg_mult * occ
     stats['occ'] = occ
   stats['loss'] = loss
@@ -363,7 +379,7 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
              'time': time_offset + train_seconds, 'loss': float(stats['loss']),
              'psnr': float(stats['psnr']), 'lr': float(stats['lr']),
              'nan_skips': int(state.nan_skips), 'pseudo_rays': int(stats['pseudo_rays'])}
-      for k in ('depth_tv', 'depth_tv_weight', 'occ'):
+      for k in ('depth_tv', 'depth_tv_weight', 'occ', 'interlevel'):
         if k in stats:
           rec[k] = float(stats[k])
       if eval_now:

@@ -11,11 +11,12 @@ import jax
 import jax.numpy as jnp
 
 from renerf_jax.deformation import grid_size, make_warp
-from renerf_jax.model import render_rays
+from renerf_jax.model import colour_levels, render_rays
 
 
 def _level_rgbs(config, params, rays, lo, hi, theta):
-  """Every level's rgb with a deformation applied.
+  """The rgb of every level that renders colour, with a deformation applied to those
+  levels' samples (the proposal level of Config.sampler = 'proposal' is not deformed).
 
   Args:
     config: Config. params: field parameters. rays: flat Rays [R].
@@ -24,9 +25,11 @@ def _level_rgbs(config, params, rays, lo, hi, theta):
   Returns:
     [levels, R, 3] rgb.
   """
-  offsets = make_warp(theta.reshape(-1, 3), lo, hi)
+  warp = make_warp(theta.reshape(-1, 3), lo, hi)
+  first = config.num_levels - colour_levels(config)
+  offsets = lambda level, means: warp(level, means) if level >= first else 0. * means
   levels = render_rays(config, params, rays, jax.random.PRNGKey(0), train=False,
-                       offsets=offsets)
+                       offsets=offsets)[first:]
   return jnp.stack([lv['rgb'] for lv in levels])
 
 

@@ -190,7 +190,8 @@ def test_old_configs_map_to_new_files(old):
 
 
 @pytest.mark.parametrize('base', ['llff3.gin', 'llff3_cpu.gin', 'llff3_fast.gin',
-                                  'llff3_10min.gin', 'llff3_freenerf.gin', 'demo.gin'] + [
+                                  'llff3_10min.gin', 'llff3_proposal.gin', 'llff3_freenerf.gin',
+                                  'demo.gin'] + [
                                       ('llff3.gin', m) for m in MODIFIERS])
 def test_renerf_gin_on_any_base_adds_only_the_rounds(base):
   """renerf.gin stacked after a base changes num_rounds to 3 and nothing else; K

@@ -1,4 +1,5 @@
 """Field backbones with one interface: (means, covs, viewdirs, feature_mask) -> raw outputs."""
+import jax
 import jax.numpy as jnp
 
 from renerf_jax import mip
@@ -36,8 +37,20 @@ def frequency_mask(config, fraction):
 
 
 def init_field_params(config, key):
-  """Initial parameters of the configured field."""
+  """Initial parameters of the configured field.
+
+  Returns:
+    flax variables {'params': ...} (initialised with `key`); with Config.sampler =
+    'proposal' also 'proposal' (the proposal field's parameters, fields/proposal.py),
+    and the two are initialised with the two halves of jax.random.split(key).
+  """
   field = make_field(config)
   means = jnp.zeros((1, 2, 3))
-  return field.init(key, means, jnp.ones_like(means) * 1e-2,
-                    jnp.zeros((1, 3)).at[:, 2].set(-1.))
+  k_field, k_prop = jax.random.split(key)
+  params = field.init(k_field if config.sampler == 'proposal' else key, means,
+                      jnp.ones_like(means) * 1e-2, jnp.zeros((1, 3)).at[:, 2].set(-1.))
+  if config.sampler != 'proposal':
+    return params
+  from renerf_jax.fields.proposal import make_proposal  # pylint: disable=g-import-not-at-top
+  return {'params': params['params'],
+          'proposal': make_proposal(config).init(k_prop, means)['params']}

@@ -197,6 +197,23 @@ def interpolate(table, rows, weights):
   return jnp.einsum('...c,...cf->...f', weights, corner_feats)
 
 
+def grid_features(table, layout: GridLayout, log2_hashmap_size, means, bbox_lo, bbox_hi):
+  """Per-level trilinear features of points: the encoding of GridField and ProposalGrid.
+
+  Args:
+    table: [layout.total, F] flattened feature table.
+    layout: static GridLayout. log2_hashmap_size: as used to build it.
+    means: [..., 3] points in the box's coordinates. bbox_lo, bbox_hi: the box (points
+      outside are clamped onto it).
+
+  Returns:
+    [..., L, F] features.
+  """
+  x = normalize_points(means, bbox_lo, bbox_hi)
+  rows, weights = grid_indices(x, layout, log2_hashmap_size)
+  return interpolate(table, rows, weights)
+
+
 def normalize_points(means, bbox_lo, bbox_hi):
   """Maps points of the box [bbox_lo, bbox_hi] to [0, 1]^3, clamping the outside."""
   lo = jnp.asarray(bbox_lo, jnp.float32)
@@ -290,9 +307,8 @@ class GridField(nn.Module):
       [..., L * F] features, level-major.
     """
     layout = self.layout
-    x = normalize_points(means, self.bbox_lo, self.bbox_hi)
-    rows, weights = grid_indices(x, layout, self.log2_hashmap_size)
-    feats = interpolate(self.table, rows, weights)  # [..., L, F]
+    feats = grid_features(self.table, layout, self.log2_hashmap_size, means, self.bbox_lo,
+                          self.bbox_hi)  # [..., L, F]
     level_w = None
     if self.antialias:
       level_w = antialias_weights(covs, layout.resolutions, self.bbox_lo, self.bbox_hi)
