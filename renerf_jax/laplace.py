@@ -67,8 +67,7 @@ def _render_level_rgb(config, params, rays, deltas):
     (rgb [colour levels, B, 3], t_vals [colour levels, B, S + 1]).
   """
   first = config.num_levels - colour_levels(config)
-  offsets = lambda level, means: (deltas[level - first] if level >= first
-                                  else jnp.zeros_like(means))
+  offsets = lambda level, means: deltas[level - first] if level >= first else 0.
   levels = render_rays(config, params, rays, jax.random.PRNGKey(0), train=False,
                        offsets=offsets)[first:]
   return (jnp.stack([lv['rgb'] for lv in levels]),

@@ -111,11 +111,12 @@ def render_rays(config, params, rays, key, train: bool,
           config.num_samples)
     if offsets is not None:
       means = means + offsets(level, means)
-    means, covs = materialize((means, covs))
-    if proposal and level == 0:
-      raw_density = make_proposal(config).apply({'params': params['proposal']}, means)
+    if proposal and level == 0:  # Density only: the covariances are never computed.
+      raw_density = make_proposal(config).apply({'params': params['proposal']},
+                                                materialize(means))
       raw_rgb = None
     else:
+      means, covs = materialize((means, covs))
       raw_rgb, raw_density = field.apply(field_vars, means, covs, rays.viewdirs,
                                          feature_mask)
     if train and config.density_noise > 0 and raw_rgb is not None:

@@ -27,7 +27,7 @@ def _level_rgbs(config, params, rays, lo, hi, theta):
   """
   warp = make_warp(theta.reshape(-1, 3), lo, hi)
   first = config.num_levels - colour_levels(config)
-  offsets = lambda level, means: warp(level, means) if level >= first else 0. * means
+  offsets = lambda level, means: warp(level, means) if level >= first else 0.
   levels = render_rays(config, params, rays, jax.random.PRNGKey(0), train=False,
                        offsets=offsets)[first:]
   return jnp.stack([lv['rgb'] for lv in levels])

@@ -46,11 +46,12 @@ def init_field_params(config, key):
   """
   field = make_field(config)
   means = jnp.zeros((1, 2, 3))
-  k_field, k_prop = jax.random.split(key)
-  params = field.init(k_field if config.sampler == 'proposal' else key, means,
-                      jnp.ones_like(means) * 1e-2, jnp.zeros((1, 3)).at[:, 2].set(-1.))
+  init = lambda k: field.init(k, means, jnp.ones_like(means) * 1e-2,
+                              jnp.zeros((1, 3)).at[:, 2].set(-1.))
   if config.sampler != 'proposal':
-    return params
+    return init(key)
+  k_field, k_prop = jax.random.split(key)
+  params = init(k_field)
   from renerf_jax.fields.proposal import make_proposal  # pylint: disable=g-import-not-at-top
   return {'params': params['params'],
           'proposal': make_proposal(config).init(k_prop, means)['params']}
