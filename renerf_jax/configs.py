@@ -131,6 +131,9 @@ class Config:
   freq_reg_end: float = 0.9  # ... until this fraction of max_steps.
   occ_reg_mult: float = 0.  # Occlusion regularisation weight (FreeNeRF: 0.01; 0: off).
   occ_reg_range: int = 20  # Samples nearest to the camera that are penalised.
+  # mip-NeRF 360's distortion loss on the last level's weights of every ray rendered in a
+  # step (the batch and the random-pose patches); 0: off (nothing computed).
+  distortion_loss_mult: float = 0.
   # --- grid backbone (Config.field = 'grid') ---
   grid_levels: int = 12  # Resolution levels of the multi-resolution grid.
   grid_base_res: int = 16  # Coarsest resolution (vertices per axis - 1).
@@ -234,6 +237,8 @@ class Config:
     _check(self.sampler != 'proposal' or self.stop_level_grad,
            'Config.sampler=\'proposal\' needs Config.stop_level_grad = True (the '
            'proposal is trained by the interlevel loss alone)')
+    _check(self.distortion_loss_mult >= 0.,
+           f'Config.distortion_loss_mult={self.distortion_loss_mult} must be >= 0')
     _check(self.proposal_samples >= 2,
            f'Config.proposal_samples={self.proposal_samples} must be >= 2')
     _check(self.pseudo_schedule in ('early', 'all', 'late'),

@@ -3,8 +3,9 @@
 RegNeRF: depth smoothness (L2 total variation of the expected depth) on patches rendered
 from random unobserved poses, with a log-linearly decaying weight, and sample-space
 annealing of the [near, far] interval. FreeNeRF: frequency regularisation (see
-mip.freq_band_mask) and occlusion regularisation. RegNeRF's colour-likelihood (flow) loss
-is left out: it is off in llff3.gin and its flow model was never released.
+mip.freq_band_mask) and occlusion regularisation. mip-NeRF 360: the distortion loss
+(compact weights along each ray, against floaters). RegNeRF's colour-likelihood (flow)
+loss is left out: it is off in llff3.gin and its flow model was never released.
 """
 import jax.numpy as jnp
 
@@ -66,3 +67,42 @@ def occlusion_loss(density, num_front):
     scalar loss.
   """
   return jnp.mean(density[:, :num_front])
+
+
+def distortion_loss(s_vals, weights):
+  """mip-NeRF 360's distortion loss of each ray, in O(S).
+
+  L = sum_{i,j} w_i w_j |m_i - m_j| + 1/3 sum_i w_i^2 (s_{i+1} - s_i), with m_i the
+  interval midpoints. The double sum is 2 sum_i w_i (m_i W_i - M_i) with W_i, M_i the
+  sums of w_j and w_j m_j over the intervals j < i (the midpoints ascend).
+
+  Args:
+    s_vals: [..., S + 1] ascending interval edges, normalised to [0, 1] along the ray
+      (mip-NeRF 360's s-distance: (t - near) / (far - near)).
+    weights: [..., S] volume-rendering weights.
+
+  Returns:
+    [...] the loss of each ray (0 where all weights are 0).
+  """
+  mids = 0.5 * (s_vals[..., 1:] + s_vals[..., :-1])
+  widths = s_vals[..., 1:] - s_vals[..., :-1]
+  w_before = jnp.cumsum(weights, axis=-1) - weights
+  wm_before = jnp.cumsum(weights * mids, axis=-1) - weights * mids
+  inter = 2. * jnp.sum(weights * (mids * w_before - wm_before), axis=-1)
+  intra = jnp.sum(weights**2 * widths, axis=-1) / 3.
+  return inter + intra
+
+
+def ray_distortion(t_vals, weights, near, far):
+  """Mean distortion loss over rays, with t normalised by each ray's [near, far].
+
+  Args:
+    t_vals: [B, S + 1] interval edges. weights: [B, S]. near, far: [B] or [B, 1].
+
+  Returns:
+    scalar: mean over the B rays of distortion_loss((t - near) / (far - near), weights);
+    a ray with far <= near is normalised by a tiny positive length instead.
+  """
+  near, far = near.reshape(-1, 1), far.reshape(-1, 1)
+  s_vals = (t_vals - near) / jnp.maximum(far - near, 1e-10)
+  return jnp.mean(distortion_loss(s_vals, weights))

@@ -243,6 +243,13 @@ def loss_fn(params, config, cam, batch, patches, step, key):
       weight = config.depth_tv_loss_mult
     loss = loss + weight * tv
     stats.update(depth_tv=tv, depth_tv_weight=weight)
+  if config.distortion_loss_mult > 0:
+    parts = [(levels[-1], rays)] + ([(p_levels[-1], flat)] if patches is not None else [])
+    counts = [r.near.size for _, r in parts]
+    dist = sum(n * regularizers.ray_distortion(lv['t_vals'], lv['weights'], r.near, r.far)
+               for n, (lv, r) in zip(counts, parts)) / sum(counts)
+    loss = loss + config.distortion_loss_mult * dist
+    stats['distortion'] = dist
   if config.occ_reg_mult > 0:
     occ = sum(regularizers.occlusion_loss(lv['density'], config.occ_reg_range)
               for lv in levels[-colour_levels(config):])
@@ -379,7 +386,7 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
              'time': time_offset + train_seconds, 'loss': float(stats['loss']),
              'psnr': float(stats['psnr']), 'lr': float(stats['lr']),
              'nan_skips': int(state.nan_skips), 'pseudo_rays': int(stats['pseudo_rays'])}
-      for k in ('depth_tv', 'depth_tv_weight', 'occ', 'interlevel'):
+      for k in ('depth_tv', 'depth_tv_weight', 'occ', 'interlevel', 'distortion'):
         if k in stats:
           rec[k] = float(stats[k])
       if eval_now:
