@@ -84,6 +84,9 @@ class Config:
   lr_final: float = 2e-5
   lr_delay_steps: int = 512
   lr_delay_mult: float = 0.01
+  # The log-linear decay lr_init -> lr_final runs over the last (1 - this) of max_steps;
+  # before it the lr stays at lr_init (0: over all steps, mip-NeRF's schedule).
+  lr_decay_start_frac: float = 0.
   grad_max_norm: float = 0.1  # Clip by global norm (0: off).
   grad_max_val: float = 0.1  # Clip by value (0: off).
   adam_eps: float = 1e-8
@@ -257,6 +260,8 @@ class Config:
            f'Config.pseudo_until_frac={self.pseudo_until_frac} must lie in [0, 1] (K as '
            f'a fraction of Config.max_steps)')
     _check(self.max_steps > 0, f'Config.max_steps={self.max_steps} must be > 0')
+    _check(0. <= self.lr_decay_start_frac < 1.,
+           f'Config.lr_decay_start_frac={self.lr_decay_start_frac} must lie in [0, 1)')
     k = pseudo_steps(self)
     _check(self.num_rounds == 0 or self.pseudo_schedule != 'early' or not self.anneal_nearfar
            or k >= min(self.anneal_nearfar_steps, self.max_steps),

@@ -51,14 +51,19 @@ class Camera:
 
 def learning_rate(step, config):
   """RegNeRF / mip-NeRF schedule: log-linear lr_init -> lr_final over max_steps, times a
-  delayed warm-up lr_delay_mult + (1 - lr_delay_mult) sin(pi/2 clip(step / delay, 0, 1))."""
+  delayed warm-up lr_delay_mult + (1 - lr_delay_mult) sin(pi/2 clip(step / delay, 0, 1)).
+
+  With Config.lr_decay_start_frac = f > 0 the lr stays at lr_init until step f max_steps
+  and the log-linear decay runs over the remaining steps (a cool-down).
+  """
   if config.lr_delay_steps > 0:
     delay = config.lr_delay_mult + (1. - config.lr_delay_mult) * jnp.sin(
         0.5 * jnp.pi * jnp.clip(step / config.lr_delay_steps, 0., 1.))
   else:
     delay = 1.
-  return delay * regularizers.log_lerp(step, config.lr_init, config.lr_final,
-                                       config.max_steps)
+  start = config.lr_decay_start_frac * config.max_steps
+  return delay * regularizers.log_lerp(jnp.maximum(step - start, 0.), config.lr_init,
+                                       config.lr_final, config.max_steps - start)
 
 
 def make_optimizer(config):

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from renerf_jax import rundir, training
+from renerf_jax.configs import ConfigError
 from renerf_jax.datasets import load_scene, ray_pool
 from conftest import REPO, tiny_config
 
@@ -22,6 +23,28 @@ def test_learning_rate_schedule():
   assert lr(512) == pytest.approx(np.exp(np.log(2e-3) * (1 - t) + np.log(2e-5) * t), rel=1e-4)
   assert lr(69768) == pytest.approx(2e-5, rel=1e-4)
   assert lr(256) < lr(512)
+
+
+def test_learning_rate_cooldown_holds_then_decays_over_the_last_steps():
+  c = tiny_config(lr_init=1e-2, lr_final=1e-3, lr_delay_steps=200, lr_delay_mult=0.01,
+                  max_steps=1250, lr_decay_start_frac=0.8)
+  lr = lambda s: float(training.learning_rate(jnp.float32(s), c))
+  # Constant lr_init from the end of the warm-up to the start of the cool-down (step 1000).
+  for s in (200, 600, 1000):
+    assert lr(s) == pytest.approx(1e-2, rel=1e-5)
+  assert lr(100) < 1e-2
+  # Log-linear over the last 250 steps: the geometric mean halfway, lr_final at the end.
+  assert lr(1125) == pytest.approx(np.sqrt(1e-2 * 1e-3), rel=1e-4)
+  assert lr(1250) == pytest.approx(1e-3, rel=1e-4)
+  assert lr(1e6) == pytest.approx(1e-3, rel=1e-4)
+  # frac 0 is the mip-NeRF schedule over all steps.
+  c0 = tiny_config(lr_init=1e-2, lr_final=1e-3, lr_delay_steps=200, lr_delay_mult=0.01,
+                   max_steps=1250)
+  assert float(training.learning_rate(jnp.float32(625), c0)) == pytest.approx(
+      np.sqrt(1e-2 * 1e-3), rel=1e-4)
+  for bad in (1., -0.1):
+    with pytest.raises(ConfigError, match='lr_decay_start_frac'):
+      tiny_config(lr_decay_start_frac=bad)
 
 
 def test_masked_mse_all_masked_is_finite_zero_with_zero_gradient():
