@@ -61,9 +61,12 @@ def learning_rate(step, config):
         0.5 * jnp.pi * jnp.clip(step / config.lr_delay_steps, 0., 1.))
   else:
     delay = 1.
-  start = config.lr_decay_start_frac * config.max_steps
-  return delay * regularizers.log_lerp(jnp.maximum(step - start, 0.), config.lr_init,
-                                       config.lr_final, config.max_steps - start)
+  if config.lr_decay_start_frac > 0:  # Static: the default traces the plain schedule.
+    start = config.lr_decay_start_frac * config.max_steps
+    return delay * regularizers.log_lerp(jnp.maximum(step - start, 0.), config.lr_init,
+                                         config.lr_final, config.max_steps - start)
+  return delay * regularizers.log_lerp(step, config.lr_init, config.lr_final,
+                                       config.max_steps)
 
 
 def make_optimizer(config):

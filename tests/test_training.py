@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from renerf_jax import rundir, training
-from renerf_jax.configs import ConfigError
 from renerf_jax.datasets import load_scene, ray_pool
+from renerf_jax.errors import ConfigError
 from conftest import REPO, tiny_config
 
 
