@@ -22,7 +22,7 @@ setup(
         'matplotlib>=3.11',
     ],
     extras_require={
-        'test': ['pytest>=9', 'pytest-xdist>=3.8', 'scikit-image>=0.26', 'nbclient>=0.11',
-                 'nbformat>=5.11', 'ipykernel>=7'],
+        'test': ['pytest>=9', 'pytest-xdist>=3.8', 'pytest-timeout>=2.3', 'scikit-image>=0.26',
+                 'nbclient>=0.11', 'nbformat>=5.11', 'ipykernel>=7'],
     },
 )

@@ -100,6 +100,7 @@ class Config:
   lindisp: bool = False
   randomized: bool = True  # Stratified jitter while training.
   # --- model: field ---
+  backbone: str = 'nerf'  # The model family Re-Nerfing runs on (backbones.py): 'nerf'.
   field: str = 'mlp'  # 'mlp' (mip-NeRF MLP) or 'grid' (fast multi-resolution grid).
   net_depth: int = 8
   net_width: int = 256
@@ -231,6 +232,7 @@ class Config:
            f'Config.ray_shape={self.ray_shape!r} (cone or cylinder)')
     _check(self.density_activation in ('softplus', 'exp'),
            f'Config.density_activation={self.density_activation!r} (softplus or exp)')
+    _check(self.backbone in ('nerf',), f'Config.backbone={self.backbone!r} (nerf)')
     _check(self.field in ('mlp', 'grid'), f'Config.field={self.field!r} (mlp or grid)')
     _check(self.sampler in ('coarse_fine', 'proposal'),
            f'Config.sampler={self.sampler!r} (coarse_fine or proposal)')

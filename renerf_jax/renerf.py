@@ -7,8 +7,10 @@
            D becomes the next round's B
 
 `round_step` is a pure function of (config, scene, state): it reads and writes no file
-and keeps no process-wide cache. Persistence and resume (round_<r>/ directories, DONE
-markers, checkpoints) live at the edge, in `resume.py`, which hands the step its
+and keeps no process-wide cache. It works on any model family through
+`backbones.Backbone` (`Config.backbone`): train on real + pseudo-views, render,
+evaluate. Persistence and resume (round_<r>/ directories, DONE markers, checkpoints)
+live at the edge, in `resume.py`, which hands the step its
 synthesis, training and evaluation functions bound to a round directory.
 """
 import dataclasses
@@ -21,7 +23,6 @@ import numpy as np
 
 from renerf_jax import random_poses, report, training
 from renerf_jax.datasets import camera_rays, ray_pool
-from renerf_jax.evaluation import cheap_eval_fn, evaluate_test_views
 from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses, render_pseudo_views
 
 
@@ -63,8 +64,9 @@ def regularizer_poses(config, scene):
 
 
 def make_pools(config, scene, pseudo: Optional[PseudoViews]):
-  """Training pools: real views, pseudo-views (if any: 'mixed' with the real rays for
-  Config.pseudo_mix='pixels', 'pseudo' alone for 'fraction'), random poses (depth TV)."""
+  """The NeRF backbone's training pools: real views, pseudo-views (if any: 'mixed' with
+  the real rays for Config.pseudo_mix='pixels', 'pseudo' alone for 'fraction'), random
+  poses (depth TV)."""
   pools = {'real': ray_pool(scene, scene.train_idx)}
   if pseudo is not None:
     pool = ray_pool(scene, None, images=pseudo.images, masks=pseudo.masks,
@@ -135,32 +137,35 @@ def masked_pseudo_views(config, scene, params, poses, show_progress=False, sigma
               'mu': float(res.mu), 'kept_fraction': float(np.mean(pv.masks))}
 
 
-def train_in_memory(config, scene, pools, **kwargs):
-  """training.train_model without a directory: no checkpoints, no log."""
-  return training.train_model(config, scene, None, pools, **kwargs)
-
-
-def evaluate_in_memory(config, scene, params):
-  """Test-view metrics without writing renders."""
-  return evaluate_test_views(config, scene, params, None, show_progress=False)
-
-
 def round_step(config, scene, state: RoundState, show_progress: bool = False,
-               synthesize_fn: Callable = synthesize, train_fn: Callable = train_in_memory,
-               evaluate_fn: Callable = evaluate_in_memory) -> RoundState:
+               synthesize_fn: Optional[Callable] = None,
+               train_fn: Optional[Callable] = None,
+               evaluate_fn: Optional[Callable] = None) -> RoundState:
   """The next round: B's params -> pseudo-views [-> masks] -> D's params and metrics.
+
+  The model family is `backbones.get_backbone(config)`; the three functions below
+  default to its in-memory ones (no file written).
 
   Args:
     config: Config. scene: Scene. state: the state after the previous round.
     show_progress: draw progress bars.
     synthesize_fn: (config, scene, params, show_progress) -> (PseudoViews, timing, meta).
-    train_fn: (config, scene, pools, **train_model kwargs) -> training.TrainResult.
+    train_fn: (config, scene, pseudo: PseudoViews or None, **kwargs) ->
+      training.TrainResult (kwargs: window, init_params, eval_fn, time_offset, desc,
+      show_progress, as training.train_model takes them).
     evaluate_fn: (config, scene, params) -> {'mean': metrics, ...}.
-    The defaults compute everything in memory; resume.py binds them to a round directory.
+    resume.py binds them to a round directory.
 
   Returns:
     RoundState of round state.round_index + 1.
   """
+  from renerf_jax import backbones  # pylint: disable=g-import-not-at-top  (it imports us)
+  backbone = backbones.get_backbone(config)
+  synthesize_fn = synthesize_fn or backbone.synthesize
+  train_fn = train_fn or (lambda cfg, sc, pseudo, **kw: backbone.train(cfg, sc, None,
+                                                                        pseudo, **kw))
+  evaluate_fn = evaluate_fn or (lambda cfg, sc, params: backbone.evaluate(
+      cfg, sc, params, None, show_progress=False))
   r = state.round_index + 1
   cfg = round_config(config, r)
   pseudo, synth_seconds = None, 0.
@@ -169,10 +174,10 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
     synth_seconds = timing['seconds']
   start = state.seconds + synth_seconds
   result = train_fn(
-      cfg, scene, make_pools(cfg, scene, pseudo),
+      cfg, scene, pseudo,
       window=training.pseudo_window(cfg) if pseudo is not None else (0, 0),
       init_params=state.params if r > 0 and config.renerf_init == 'continue' else None,
-      eval_fn=cheap_eval_fn(cfg, scene), time_offset=start,
+      eval_fn=backbone.cheap_eval_fn(cfg, scene), time_offset=start,
       desc=f'round {r}' if r else 'baseline', show_progress=show_progress)
   seconds = start + result.train_seconds
   ev = evaluate_fn(cfg, scene, result.state.params)

@@ -11,13 +11,11 @@ left: its pseudo-views (if saved) and its last atomic checkpoint. Every write is
 (temp file + rename), and temp files of a killed write are removed when the round resumes.
 """
 import os
-from typing import Callable
+from typing import Callable, Optional
 
-import jax
 from flax import serialization
 
-from renerf_jax import renerf, report, rundir, training
-from renerf_jax.evaluation import evaluate_test_views
+from renerf_jax import backbones, renerf, report, rundir
 from renerf_jax.pseudo_views import load_pseudo_views, save_pseudo_views
 
 
@@ -56,8 +54,7 @@ def save_round(rdir, state: renerf.RoundState):
 def load_round(config, rdir, state: renerf.RoundState) -> renerf.RoundState:
   """The RoundState after the finished round in rdir (read-only)."""
   r = state.round_index + 1
-  template = training.init_state(renerf.round_config(config, r),
-                                 jax.random.PRNGKey(0)).params
+  template = backbones.get_backbone(config).init_params(renerf.round_config(config, r))
   with open(os.path.join(rdir, 'params.msgpack'), 'rb') as f:
     params = serialization.from_bytes(template, f.read())
   result = report.read_json(os.path.join(rdir, 'result.json'))
@@ -69,19 +66,20 @@ def load_round(config, rdir, state: renerf.RoundState) -> renerf.RoundState:
 
 
 def run_rounds(config, scene, run_dir, show_progress=True,
-               synthesize_fn: Callable = renerf.synthesize) -> renerf.RoundState:
+               synthesize_fn: Optional[Callable] = None) -> renerf.RoundState:
   """Baseline plus config.num_rounds rounds in run_dir, resuming what is there.
 
   Args:
     config, scene: Config and Scene. run_dir: the run directory.
     show_progress: draw progress bars.
-    synthesize_fn: the pseudo-view synthesis (experiments share work between table
-      variants through it).
+    synthesize_fn: the pseudo-view synthesis (None: the backbone's; experiments share
+      work between table variants through it).
 
   Returns:
     RoundState after the last round.
   """
   renerf.check_rounds_config(config, scene)
+  backbone = backbones.get_backbone(config)
   state = renerf.initial_state()
   for r in range(config.num_rounds + 1):
     rdir = round_dir(run_dir, r)
@@ -92,10 +90,11 @@ def run_rounds(config, scene, run_dir, show_progress=True,
     train_dir, eval_dir = os.path.join(rdir, 'train'), os.path.join(rdir, 'eval')
     state = renerf.round_step(
         config, scene, state, show_progress,
-        synthesize_fn=stored_synthesis(os.path.join(rdir, 'pseudo_views'), synthesize_fn),
-        train_fn=lambda cfg, sc, pools, **kw: training.train_model(cfg, sc, train_dir,
-                                                                   pools, **kw),
-        evaluate_fn=lambda cfg, sc, params: evaluate_test_views(cfg, sc, params, eval_dir,
-                                                                show_progress=False))
+        synthesize_fn=stored_synthesis(os.path.join(rdir, 'pseudo_views'),
+                                       synthesize_fn or backbone.synthesize),
+        train_fn=lambda cfg, sc, pseudo, **kw: backbone.train(cfg, sc, train_dir, pseudo,
+                                                              **kw),
+        evaluate_fn=lambda cfg, sc, params: backbone.evaluate(cfg, sc, params, eval_dir,
+                                                              show_progress=False))
     save_round(rdir, state)
   return state

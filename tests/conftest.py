@@ -64,7 +64,18 @@ os.environ['RENERF_JAX_CACHE_DIR'] = _CACHE_DIR
 atexit.register(shutil.rmtree, _CACHE_DIR, True)  # whichever process imported this
 
 
-def pytest_configure(config):  # pylint: disable=unused-argument
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config):
+  """Turns on the shared compilation cache, and xdist's worker restarts off.
+
+  A worker that dies (a segfault in compiled code, or pytest-timeout ending a stuck
+  test) then ends the run with its crashed test reported and the summary line printed;
+  a replacement worker would re-run compiled code on the same CPU and once hung the
+  suite with no summary (issue 38). `--max-worker-restart N` on the command line still
+  wins.
+  """
+  if getattr(config.option, 'maxworkerrestart', 'absent') is None:
+    config.option.maxworkerrestart = '0'
   from renerf_jax import jit_cache  # pylint: disable=g-import-not-at-top
   jit_cache.enable_compilation_cache()
 

@@ -6,7 +6,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from dense_reference import reference_hessian_diagonals
+from dense_reference import (gn_hessian_diagonal, reference_hessian_diagonals,
+                             true_hessian_diagonal)
 from tiny_scene import LAM, take, tiny_setup
 
 from renerf_jax import laplace, uncertainty
@@ -90,7 +91,27 @@ def test_sparse_kahan_add_touches_only_ids_and_sums_repeats():
   assert float(one[0][0, 0]) == 1.
 
 
-def test_hessian_diagonal_matches_jax_hessian(setup):
+def test_forward_mode_reference_diagonals_equal_jax_hessian_on_a_closed_form():
+  """The reference's two diagonals against jax.hessian of a small nonlinear map (cheap
+  here; on the renderer, jax.hessian's graph is what crashed XLA, issue 38)."""
+  a = jax.random.normal(jax.random.PRNGKey(0), (2, 4, 3, 5))
+
+  def fn(theta):  # [5] -> [levels 2, R 4, 3], with cross terms between coordinates.
+    return jnp.sin(a @ theta) * jnp.exp(0.3 * (a**2) @ theta) + (a @ theta)**3
+
+  theta0 = jnp.array([0.1, -0.2, 0.3, 0.05, -0.4])
+  target = fn(theta0) + 0.5
+  loss = lambda th, tgt: jnp.sum((fn(th) - tgt)**2) / 4.
+  gn = np.asarray(gn_hessian_diagonal(fn, theta0))
+  np.testing.assert_allclose(gn, np.diag(jax.hessian(loss)(theta0, fn(theta0))),
+                             rtol=1e-4)
+  true = np.asarray(true_hessian_diagonal(fn, theta0, target))
+  want = np.diag(jax.hessian(loss)(theta0, target))
+  np.testing.assert_allclose(true, want, rtol=1e-4)
+  assert np.max(np.abs(true - gn)) > 1e-2 * np.max(gn)  # The residual term is there.
+
+
+def test_hessian_diagonal_matches_the_dense_reference(setup):
   config, params, pool = setup
   rays = take(pool['rays'], HESSIAN_RAYS)
   h = np.asarray(laplace.hessian_diagonal(config, params, rays, -1., 1., 1, LAM, chunk=4))

@@ -203,20 +203,23 @@ def test_proposal_samples_cover_the_surface_the_dense_sampler_finds(trained):
 
 def test_proposal_params_train_and_laplace_sees_only_the_fine_level(trained):
   """The proposal table moved away from its init; the Hessian pass over the fine level
-  alone (the one colour level) equals the dense jax.hessian reference."""
+  alone (the one colour level) equals the dense forward-mode reference."""
   config, scene, params = trained
   init = init_field_params(config, jax.random.PRNGKey(0))
   moved = np.abs(np.asarray(params['proposal']['table'])
                  - np.asarray(init['proposal']['table'])).max()
   assert moved > 1e-2
-  rays = jax.tree_util.tree_map(lambda x: x[::192], ray_pool(scene, [0])['rays'])
+  # 64 rays: on the 3^3 grid they see 30-40 of the 81 entries whatever the CPU (16 rays
+  # saw 9-13 depending on the trained model, which differs with XLA's instruction set
+  # and thread count).
+  rays = jax.tree_util.tree_map(lambda x: x[::48], ray_pool(scene, [0])['rays'])
   sens, means = laplace.sample_sensitivities(config, params, rays,
                                              jnp.ones(rays.origins.shape[0]))
   assert sens.shape == (3, 1, rays.origins.shape[0], 8, 3) and means.shape[0] == 1
   lam = 1e-4
   h = np.asarray(laplace.hessian_diagonal(config, params, rays, -1., 1., 1, lam, chunk=8))
   ref = np.asarray(reference_hessian_diagonals(config, params, rays, -1., 1., 1)['gn'])
-  assert np.sum(ref > 1e-2 * ref.max()) > 10  # Many vertices seen: a non-trivial check.
+  assert np.sum(ref > 1e-2 * ref.max()) > 20  # Many vertices seen: a non-trivial check.
   np.testing.assert_allclose(h, ref + 2. * lam, rtol=1e-3, atol=1e-5 * ref.max())
 
 

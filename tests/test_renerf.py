@@ -119,3 +119,87 @@ def test_uncertainty_heatmap_shows_the_order_despite_outliers_and_bad_values():
   # A shared reference scale: the same U gets the same colour in every view.
   other = np.full((2, 2), 121.0)
   np.testing.assert_allclose(uncertainty_heatmap(other, u)[0, 0], heat[0, 1])
+
+
+def test_the_round_driver_runs_any_backbone_through_its_interface(tmp_path, monkeypatch):
+  """A toy backbone (a constant colour per model) goes through the same round_step,
+  resume and reports: the driver calls nothing of the NeRF's own."""
+  from renerf_jax import backbones, training  # pylint: disable=g-import-not-at-top
+  calls = []
+
+  def train(config, scene, out_dir, pseudo, window, init_params, eval_fn, time_offset,
+            desc, show_progress):
+    del init_params, time_offset, show_progress
+    calls.append(('train', desc, out_dir is not None, window,
+                  None if pseudo is None else pseudo.images.shape[0]))
+    views = [scene.images[scene.train_idx]] + ([] if pseudo is None else [pseudo.images])
+    colour = np.mean(np.concatenate([v.reshape(-1, 3) for v in views]), axis=0,
+                     dtype=np.float64)
+    state = training.TrainState(step=np.int32(config.max_steps),
+                                params={'colour': np.float32(colour)}, opt_state=None,
+                                nan_skips=np.int32(0))
+    return training.TrainResult(state=state, train_seconds=1.,
+                                curve=[{'step': 1, 'eval_psnr': eval_fn(state.params)}])
+
+  def render_views(config, scene, params, poses, show_progress=False):
+    del config, show_progress
+    shape = (len(poses), scene.height, scene.width)
+    return {'rgb': np.broadcast_to(params['colour'], shape + (3,)),
+            'depth': np.ones(shape, np.float32), 'acc': np.ones(shape, np.float32)}
+
+  def synthesize(config, scene, params, show_progress=False):
+    poses, meta = pseudo_view_poses(config, scene)
+    rgb = render_views(config, scene, params, poses)['rgb']
+    pv = renerf.PseudoViews(images=np.array(rgb, np.float32), poses=poses,
+                            masks=np.ones(rgb.shape[:3], np.float32),
+                            uncertainty=np.zeros(rgb.shape[:3], np.float32))
+    return pv, {'seconds': 0.5}, meta
+
+  def evaluate(config, scene, params, out_dir, show_progress=False):
+    del config, out_dir, show_progress
+    mse = float(np.mean((params['colour'] - scene.images[scene.test_idx])**2))
+    return {'per_image': [], 'mean': {'psnr': -10. * np.log10(mse)}}
+
+  toy = backbones.Backbone(
+      name='nerf', init_params=lambda config: {'colour': np.zeros(3, np.float32)},
+      train=train, synthesize=synthesize,
+      cheap_eval_fn=lambda config, scene: lambda p: evaluate(config, scene, p, None)[
+          'mean']['psnr'], evaluate=evaluate, render_views=render_views)
+  monkeypatch.setitem(backbones.BACKBONES, 'nerf', toy)
+  config = tiny_config(num_rounds=2, max_steps=10)
+  scene = load_scene(config)
+  state = renerf.run_rounds(config, scene)
+  assert [c[:2] for c in calls] == [('train', 'baseline'), ('train', 'round 1'),
+                                    ('train', 'round 2')]
+  assert calls[0][4] is None and calls[1][4] == calls[2][4] == 12  # 7x on 3 views
+  assert calls[1][3] == training.pseudo_window(renerf.round_config(config, 1))
+  assert [m['cumulative_seconds'] for m in state.metrics] == [1., 2.5, 4.]
+  real = scene.images[scene.train_idx].reshape(-1, 3).mean(0, dtype=np.float64)
+  np.testing.assert_allclose(state.params['colour'], real, rtol=1e-5)  # D = B here.
+  calls.clear()
+  on_disk = resume.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
+  assert [c[2] for c in calls] == [True] * 3  # Trained into the round directories.
+  np.testing.assert_array_equal(on_disk.params['colour'], state.params['colour'])
+  again = resume.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
+  assert len(calls) == 3  # Finished rounds are loaded through init_params, not retrained.
+  np.testing.assert_array_equal(again.params['colour'], state.params['colour'])
+  assert [m['psnr'] for m in again.metrics] == [m['psnr'] for m in state.metrics]
+
+
+def test_backbone_is_validated_and_the_nerf_renders_rgb_depth_acc():
+  from renerf_jax import backbones  # pylint: disable=g-import-not-at-top
+  with pytest.raises(ConfigError, match='Config.backbone'):
+    tiny_config(backbone='splats')
+  config = tiny_config()
+  backbone = backbones.get_backbone(config)
+  assert backbone is backbones.NERF and set(backbones.BACKBONES) == {'nerf'}
+  scene = load_scene(config)
+  params = backbone.init_params(config)
+  out = backbone.render_views(config, scene, params, scene.poses[scene.test_idx[:2]])
+  h, w = scene.height, scene.width
+  assert out['rgb'].shape == (2, h, w, 3) and out['depth'].shape == (2, h, w)
+  assert out['acc'].shape == (2, h, w) and np.all((out['acc'] >= 0) & (out['acc'] <= 1))
+  ev = backbone.evaluate(config, scene, params, None, show_progress=False)
+  first = np.clip(out['rgb'][0], 0., 1.)
+  psnr = -10. * np.log10(np.mean((first - scene.images[scene.test_idx[0]])**2))
+  np.testing.assert_allclose(ev['per_image'][0]['psnr'], psnr, rtol=1e-4)
