@@ -10,9 +10,9 @@ import os
 import sys
 
 from renerf_jax import cli, report, rundir
+from renerf_jax.backbones import get_backbone
 from renerf_jax.configs import exit_on_error
 from renerf_jax.datasets import load_scene
-from renerf_jax.evaluation import evaluate_test_views
 from renerf_jax.renerf import initial_state, round_config, rounds_table
 from renerf_jax.resume import load_round, round_dir
 
@@ -37,7 +37,8 @@ def round_eval_dir(config, scene, params, rdir, r):
     if os.path.isfile(path) and wanted <= set(report.read_json(path)['mean']):
       return os.path.dirname(path)
   out = os.path.join(rdir, 'eval_extra')
-  evaluate_test_views(round_config(config, r), scene, params, out)
+  get_backbone(config).evaluate(round_config(config, r), scene, params, out,
+                                show_progress=True)
   return out
 
 

@@ -100,7 +100,8 @@ class Config:
   lindisp: bool = False
   randomized: bool = True  # Stratified jitter while training.
   # --- model: field ---
-  backbone: str = 'nerf'  # The model family Re-Nerfing runs on (backbones.py): 'nerf'.
+  backbone: str = 'nerf'  # The model family Re-Nerfing runs on (backbones.py): 'nerf' or
+  # 'gaussians' (3D Gaussian Splatting, the gs_* fields below).
   field: str = 'mlp'  # 'mlp' (mip-NeRF MLP) or 'grid' (fast multi-resolution grid).
   net_depth: int = 8
   net_width: int = 256
@@ -116,6 +117,33 @@ class Config:
   density_noise: float = 1.  # Std of noise added to raw density in training only.
   density_activation: str = 'softplus'  # 'softplus' (mip-NeRF) or 'exp' (trunc_exp,
   # Instant-NGP; the grid backbone needs it, see model.raw_to_outputs).
+  # --- Gaussians backbone (Config.backbone = 'gaussians') ---
+  # 3D Gaussian Splatting (Kerbl et al. 2023) at a static capacity (renerf_jax/gaussians).
+  # Step counts are fractions of max_steps (3DGS: 30000 steps), so they scale with a run.
+  gs_capacity: int = 20000  # Gaussian slots; densification fills the inactive ones.
+  gs_init_points: int = 5000  # Random initial Gaussians, uniform in Scene.world_bounds.
+  gs_init_opacity: float = 0.1  # Their opacity (3DGS: 0.1).
+  gs_tile_cap: int = 64  # At most this many Gaussians (the nearest) per 16x16 tile.
+  gs_extent: float = 0.  # Scene extent (lr, densify sizes); 0: 3DGS's 1.1 x camera radius.
+  gs_sh_interval_frac: float = 1000 / 30000  # SH degree +1 every this (3DGS: 1000), to 3.
+  gs_densify_from_frac: float = 500 / 30000  # Densify after this step (3DGS: 500)...
+  gs_densify_until_frac: float = 15000 / 30000  # ... until this one (3DGS: 15000)...
+  gs_densify_every_frac: float = 100 / 30000  # ... every this many (3DGS: 100).
+  gs_opacity_reset_every_frac: float = 3000 / 30000  # Opacity reset period (3DGS: 3000).
+  gs_grad_threshold: float = 5e-4  # Mean view-space gradient to densify at (3DGS: 2e-4;
+  # FSGS's few-shot LLFF value 5e-4 here: fewer, better-supported Gaussians from 3 views;
+  # DNGaussian uses 1.3e-3).
+  gs_min_opacity: float = 0.005  # Prune Gaussians less opaque than this.
+  gs_percent_dense: float = 0.01  # Clone below / split above this fraction of the extent.
+  gs_lr_means_init: float = 1.6e-4  # Position lr (x the extent), decayed exponentially...
+  gs_lr_means_final: float = 1.6e-6  # ... to this at max_steps.
+  gs_lr_sh_dc: float = 2.5e-3  # Lr of the SH DC (base colour) coefficients.
+  gs_lr_sh_rest: float = 2.5e-3 / 20  # Lr of the higher SH coefficients.
+  gs_lr_opacity: float = 0.05  # Lr of the opacity logits.
+  gs_lr_scales: float = 5e-3  # Lr of the log scales.
+  gs_lr_quats: float = 1e-3  # Lr of the rotations.
+  gs_lambda_dssim: float = 0.2  # Loss (1 - l) L1 + l (1 - SSIM).
+  gs_background: Tuple[float, float, float] = (0., 0., 0.)  # Render background (black).
   # --- RegNeRF regularisers (0 / False switches a term off: nothing of it is traced) ---
   depth_tv_loss_mult: float = 0.1  # Depth-TV weight after the decay (0: off).
   depth_tv_decay: bool = True  # Log-linear decay from _start to _end over _maxstep.
@@ -232,7 +260,32 @@ class Config:
            f'Config.ray_shape={self.ray_shape!r} (cone or cylinder)')
     _check(self.density_activation in ('softplus', 'exp'),
            f'Config.density_activation={self.density_activation!r} (softplus or exp)')
-    _check(self.backbone in ('nerf',), f'Config.backbone={self.backbone!r} (nerf)')
+    _check(self.backbone in ('nerf', 'gaussians'),
+           f'Config.backbone={self.backbone!r} (nerf or gaussians)')
+    _check(self.gs_init_points >= 1 and self.gs_capacity >= self.gs_init_points,
+           f'Config.gs_capacity={self.gs_capacity} must be >= Config.gs_init_points='
+           f'{self.gs_init_points} >= 1')
+    _check(0. < self.gs_init_opacity < 1.,
+           f'Config.gs_init_opacity={self.gs_init_opacity} must lie in (0, 1)')
+    _check(self.gs_tile_cap >= 1, f'Config.gs_tile_cap={self.gs_tile_cap} must be >= 1')
+    _check(self.gs_extent >= 0., f'Config.gs_extent={self.gs_extent} must be >= 0')
+    for name in ('gs_sh_interval_frac', 'gs_densify_every_frac',
+                 'gs_opacity_reset_every_frac'):
+      _check(getattr(self, name) > 0., f'Config.{name}={getattr(self, name)} must be > 0')
+    _check(0. <= self.gs_densify_from_frac <= self.gs_densify_until_frac <= 1.,
+           f'Config.gs_densify_from_frac={self.gs_densify_from_frac} and '
+           f'gs_densify_until_frac={self.gs_densify_until_frac} must satisfy '
+           '0 <= from <= until <= 1')
+    for name in ('gs_grad_threshold', 'gs_percent_dense', 'gs_lr_means_init',
+                 'gs_lr_means_final', 'gs_lr_sh_dc', 'gs_lr_sh_rest', 'gs_lr_opacity',
+                 'gs_lr_scales', 'gs_lr_quats'):
+      _check(getattr(self, name) > 0., f'Config.{name}={getattr(self, name)} must be > 0')
+    _check(0. <= self.gs_min_opacity < 1.,
+           f'Config.gs_min_opacity={self.gs_min_opacity} must lie in [0, 1)')
+    _check(0. <= self.gs_lambda_dssim <= 1.,
+           f'Config.gs_lambda_dssim={self.gs_lambda_dssim} must lie in [0, 1]')
+    _check(len(self.gs_background) == 3,
+           f'Config.gs_background={self.gs_background!r} must be an RGB triple')
     _check(self.field in ('mlp', 'grid'), f'Config.field={self.field!r} (mlp or grid)')
     _check(self.sampler in ('coarse_fine', 'proposal'),
            f'Config.sampler={self.sampler!r} (coarse_fine or proposal)')

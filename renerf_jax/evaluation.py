@@ -28,7 +28,7 @@ def cheap_eval_fn(config, scene):
 
 
 def evaluate_test_views(config, scene, params, out_dir, show_progress=True):
-  """Renders every test view, writes PNGs and per-image + mean metrics (JSON, markdown).
+  """Renders every test view of a NeRF, writes PNGs and per-image + mean metrics.
 
   Args:
     config: Config. scene: Scene. params: field parameters.
@@ -39,14 +39,32 @@ def evaluate_test_views(config, scene, params, out_dir, show_progress=True):
   Returns:
     dict {'per_image': [...], 'mean': {...}}.
   """
+  rays = camera_rays(scene, scene.test_idx)
+
+  def render_view(j, i):
+    return render_image(config, params, jax.tree_util.tree_map(lambda x: x[j], rays),
+                        show_progress=show_progress, desc=f'test view {i}')
+  return evaluate_views(config, scene, render_view, out_dir)
+
+
+def evaluate_views(config, scene, render_view, out_dir):
+  """Per-image and mean metrics of any backbone's test renders (and their PNGs).
+
+  Args:
+    config: Config (config.lpips_nets). scene: Scene.
+    render_view: (j, i) -> {'rgb': [H, W, 3], 'distance': [H, W]} of test view i, the
+      j-th of scene.test_idx (distance: the depth shown in depth_XXX.png).
+    out_dir: folder for test_XXX.png, depth_XXX.png, metrics.json, metrics.md (None:
+      nothing is written).
+
+  Returns:
+    dict {'per_image': [...], 'mean': {...}}.
+  """
   if out_dir is not None:
     os.makedirs(out_dir, exist_ok=True)
-  rays = camera_rays(scene, scene.test_idx)
   per_image = []
   for j, i in enumerate(scene.test_idx):
-    ray_j = jax.tree_util.tree_map(lambda x: x[j], rays)
-    out = render_image(config, params, ray_j, show_progress=show_progress,
-                       desc=f'test view {i}')
+    out = render_view(j, i)
     pred = np.clip(out['rgb'], 0., 1.)
     m = metrics.image_metrics(pred, scene.images[i], config.lpips_nets)
     m['name'] = f'test_{int(i):03d}'

@@ -42,10 +42,13 @@ def stored_synthesis(out_dir, synthesize_fn: Callable = renerf.synthesize) -> Ca
   return fn
 
 
-def save_round(rdir, state: renerf.RoundState):
-  """Writes the round's params and result.json, then marks it DONE."""
+def save_round(rdir, state: renerf.RoundState, export=None):
+  """Writes the round's params, the backbone's exports (export(params, rdir), e.g. the
+  Gaussians' .ply) and result.json, then marks it DONE."""
   with report.atomic_open(os.path.join(rdir, 'params.msgpack'), 'wb') as f:
     f.write(serialization.to_bytes(state.params))
+  if export is not None:
+    export(state.params, rdir)
   report.write_json(os.path.join(rdir, 'result.json'), {'metrics': state.metrics[-1],
                                                         'curve': state.curves[-1]})
   rundir.mark_done(rdir, {'round': state.round_index})
@@ -96,5 +99,5 @@ def run_rounds(config, scene, run_dir, show_progress=True,
                                                               **kw),
         evaluate_fn=lambda cfg, sc, params: backbone.evaluate(cfg, sc, params, eval_dir,
                                                               show_progress=False))
-    save_round(rdir, state)
+    save_round(rdir, state, backbone.export)
   return state

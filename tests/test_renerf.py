@@ -190,9 +190,10 @@ def test_backbone_is_validated_and_the_nerf_renders_rgb_depth_acc():
   from renerf_jax import backbones  # pylint: disable=g-import-not-at-top
   with pytest.raises(ConfigError, match='Config.backbone'):
     tiny_config(backbone='splats')
+  assert backbones.get_backbone(tiny_config(backbone='gaussians')) is backbones.GAUSSIANS
   config = tiny_config()
   backbone = backbones.get_backbone(config)
-  assert backbone is backbones.NERF and set(backbones.BACKBONES) == {'nerf'}
+  assert backbone is backbones.NERF and set(backbones.BACKBONES) == {'nerf', 'gaussians'}
   scene = load_scene(config)
   params = backbone.init_params(config)
   out = backbone.render_views(config, scene, params, scene.poses[scene.test_idx[:2]])

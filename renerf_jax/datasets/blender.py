@@ -61,4 +61,5 @@ def load_blender(config) -> Scene:
                far=config.far, use_ndc=False, white_bkgd=config.white_bkgd,
                train_idx=np.arange(n_tr), test_idx=np.arange(n_tr, len(paths)),
                forward_facing=False,
-               bbox=((-1.5, -1.5, -1.5), (1.5, 1.5, 1.5)))
+               bbox=((-1.5, -1.5, -1.5), (1.5, 1.5, 1.5)),
+               world_bounds=((-1.5, -1.5, -1.5), (1.5, 1.5, 1.5)))

@@ -6,7 +6,8 @@ import numpy as np
 
 from renerf_jax import cameras
 from renerf_jax.datasets import images as image_io
-from renerf_jax.datasets.scene import Scene, fewshot_split, focus_depth_from_bounds
+from renerf_jax.datasets.scene import (Scene, fewshot_split, focus_depth_from_bounds,
+                                       frustum_bounds)
 from renerf_jax.errors import DataError
 
 
@@ -82,7 +83,8 @@ def load_llff(config) -> Scene:
   OpenGL convention, scales focal by 1/factor, raises the near bounds to
   Config.llff_min_near where it names this scene (warns when the bounds look spurious:
   bounds_warning), rescales by 1/(0.75 * min bound) and recentres on the average pose.
-  Rays use NDC when config.use_ndc.
+  Rays use NDC when config.use_ndc. Scene.world_bounds is the box of the camera frusta
+  between the rescaled near and (capped) far bounds (scene.frustum_bounds).
   """
   if not os.path.isdir(config.data_dir):
     raise DataError(f'data directory not found: {config.data_dir!r} (Config.data_dir)')
@@ -113,4 +115,5 @@ def load_llff(config) -> Scene:
                poses=poses.astype(np.float32), focal=focal, near=near, far=far,
                use_ndc=config.use_ndc, white_bkgd=config.white_bkgd,
                train_idx=train_idx, test_idx=test_idx, forward_facing=True, focus_depth=focus_depth_from_bounds(bounds),
-               bbox=((-1.,) * 3, (1.,) * 3) if config.use_ndc else ((-far,) * 3, (far,) * 3))
+               bbox=((-1.,) * 3, (1.,) * 3) if config.use_ndc else ((-far,) * 3, (far,) * 3),
+               world_bounds=frustum_bounds(poses[train_idx], bounds[train_idx], focal, h, w))

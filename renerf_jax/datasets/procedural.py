@@ -10,7 +10,8 @@ scene exercises the same code path as the reference LLFF case.
 import numpy as np
 
 from renerf_jax import cameras
-from renerf_jax.datasets.scene import Scene, fewshot_split, focus_depth_from_bounds
+from renerf_jax.datasets.scene import (Scene, fewshot_split, focus_depth_from_bounds,
+                                       frustum_bounds)
 
 # (centre x, y, z, radius, texture frequency, hue phase)
 _SPHERES = np.array([
@@ -111,7 +112,8 @@ def render_views(poses, h, w, focal, supersample=2):
 
 def load_procedural(config) -> Scene:
   """Builds the embedded scene at config.procedural_size with config.procedural_views
-  cameras, processed like LLFF (bounds from the true depths, rescale, recentre, NDC)."""
+  cameras, processed like LLFF (bounds from the true depths, rescale, recentre, NDC;
+  Scene.world_bounds from the frusta as for LLFF)."""
   h, w = config.procedural_size
   focal = 1.05 * w
   poses = camera_poses(config.procedural_views)
@@ -126,4 +128,5 @@ def load_procedural(config) -> Scene:
                use_ndc=config.use_ndc, white_bkgd=False, train_idx=train_idx,
                test_idx=test_idx, depths=(depths * scale).astype(np.float32),
                forward_facing=True, focus_depth=focus_depth_from_bounds(bounds),
-               bbox=((-1.,) * 3, (1.,) * 3) if config.use_ndc else ((-far,) * 3, (far,) * 3))
+               bbox=((-1.,) * 3, (1.,) * 3) if config.use_ndc else ((-far,) * 3, (far,) * 3),
+               world_bounds=frustum_bounds(poses[train_idx], bounds[train_idx], focal, h, w))

@@ -27,6 +27,9 @@ class Scene:
   forward_facing: bool = True
   focus_depth: float = 1.0  # Depth the random forward-facing poses look at.
   bbox: tuple = ((-1., -1., -1.), (1., 1., 1.))  # Scene box (NDC cube for LLFF).
+  # World-space box ((lo x, y, z), (hi x, y, z)) holding the scene content (where a
+  # Gaussian scene is initialised; bbox is the NDC cube for LLFF); None: unknown.
+  world_bounds: Optional[tuple] = None
 
   @property
   def height(self) -> int:
@@ -70,6 +73,41 @@ def focus_depth_from_bounds(bounds, dt=0.75):
   inf = 5 max bound (a depth between the nearest and a far point, weighted to the far)."""
   close, inf = bounds.min() * .9, bounds.max() * 5.
   return float(1. / ((1. - dt) / close + dt / inf))
+
+
+FRUSTUM_DEPTH_CAP = 8.  # frustum_bounds: far depths capped at this x the smallest near.
+
+
+def frustum_bounds(poses, bounds, focal, height, width, depth_cap=FRUSTUM_DEPTH_CAP):
+  """World box of the camera frusta between each image's near and (capped) far depth.
+
+  The loaders pass the training cameras only (the test poses stay unseen).
+
+  The box holds the 4 image-corner rays of every camera at depth near_i and at depth
+  max(near_i, min(far_i, depth_cap * min_j near_j)). The far bounds are capped because
+  they can be far larger than the content (a few distant points; LLFF's far / near is
+  4-6 for its own captures but over 20 for re-processed ones), and the box is where
+  random Gaussians are spread uniformly: with the cap of 8 the frusta of LLFF's own
+  captures (fern: far bounds under 4.7 x the smallest near) are whole.
+
+  Args:
+    poses: [N, 3, 4] OpenGL camera-to-world. bounds: [N, 2] near/far z-depths (the
+      scene's units, after any rescaling). focal: pixels. height, width: image size.
+    depth_cap: the far cap as a multiple of the smallest near bound.
+
+  Returns:
+    ((lo x, y, z), (hi x, y, z)) Python floats.
+  """
+  poses = np.asarray(poses, np.float64)
+  bounds = np.asarray(bounds, np.float64)
+  near = bounds[:, 0]
+  far = np.maximum(near, np.minimum(bounds[:, 1], depth_cap * near.min()))
+  hx, hy = 0.5 * width / focal, 0.5 * height / focal
+  corners = np.array([[sx * hx, sy * hy, -1.] for sx in (-1., 1.) for sy in (-1., 1.)])
+  dirs = np.einsum('nij,kj->nki', poses[:, :3, :3], corners)  # [N, 4, 3], unit z-depth.
+  pts = np.concatenate([poses[:, None, :3, 3] + d[:, None, None] * dirs
+                        for d in (near, far)], axis=1).reshape(-1, 3)
+  return tuple(float(v) for v in pts.min(0)), tuple(float(v) for v in pts.max(0))
 
 
 def fewshot_split(n_images, n_input_views, llffhold=8):

@@ -1,0 +1,569 @@
+"""Training a Gaussian scene as 3DGS does (Kerbl et al. 2023), at static shapes.
+
+One whole image per step, drawn uniformly from the real training views and, inside the
+pseudo-view window, from the real and the pseudo-views together (the pseudo-views "join
+the real views as images drawn uniformly"); the loss is (1 - l) L1 + l (1 - SSIM) with
+per-pixel masks; per-parameter Adam learning rates (the position's decayed exponentially
+and scaled by the scene extent); the SH degree raised every `gs_sh_interval_frac` of the
+run; adaptive density control (density.py) between steps. `train_gaussians` mirrors
+`renerf_jax.training.train_model` at the edges: atomic checkpoints, bit-for-bit resume,
+the JSONL log, the evaluation curve and the progress bar.
+
+The jitted step is `train_step(config, cam, pseudo_on, state, data, key)` with (config,
+cam, pseudo_on) static: two compiled variants, with and without the pseudo-views. The SH
+degree is traced (coefficients above it are multiplied by 0, so they get zero gradients
+and stay 0 under Adam, as in the reference), so raising it does not recompile.
+"""
+import dataclasses
+import functools
+import os
+import time
+from typing import Any
+
+import flax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from renerf_jax import metrics, regularizers, rundir
+from renerf_jax.gaussians import density
+from renerf_jax.gaussians import params as params_lib
+from renerf_jax.gaussians import render as render_lib
+from renerf_jax.progress import progress_bar
+from renerf_jax.training import TrainResult
+
+ADAM_EPS = 1e-15  # 3DGS's Adam epsilon.
+NEAR = 0.2  # Gaussians nearer than this depth are culled (the reference's frustum test).
+TILE = 16
+# Optimised fields: the Gaussians' float fields with the SH split into DC and the rest
+# (their learning rates differ).
+FIELDS = ('means', 'log_scales', 'quats', 'opacity_logits', 'sh_dc', 'sh_rest')
+
+
+@flax.struct.dataclass
+class GaussianTrainState:
+  step: jnp.ndarray  # int32 scalar: optimisation steps taken.
+  params: params_lib.Gaussians
+  opt_state: Any  # optax state of the FIELDS dict (see to_fields).
+  nan_skips: jnp.ndarray  # int32 scalar: steps skipped for a non-finite loss/gradient.
+  stats: density.DensityStats  # Densification statistics since the last densification.
+  dropped: jnp.ndarray  # int32 scalar: densification candidates that found no free slot.
+  pseudo_images: jnp.ndarray  # int32 scalar: steps that drew a pseudo-view.
+
+
+@dataclasses.dataclass(frozen=True)
+class Camera:
+  """Static pinhole camera of a scene (shared by all its views)."""
+  h: int
+  w: int
+  focal: float
+
+  @classmethod
+  def of(cls, scene):
+    return cls(scene.height, scene.width, float(scene.focal))
+
+
+# ------------------------------------------------------------------------- parameters
+
+
+def to_fields(gaussians):
+  """The optimised fields of Gaussians as a dict (sh split into sh_dc and sh_rest)."""
+  g = gaussians
+  return {'means': g.means, 'log_scales': g.log_scales, 'quats': g.quats,
+          'opacity_logits': g.opacity_logits, 'sh_dc': g.sh[:, :1], 'sh_rest': g.sh[:, 1:]}
+
+
+def from_fields(fields, active):
+  """Inverse of to_fields."""
+  return params_lib.Gaussians(
+      means=fields['means'], log_scales=fields['log_scales'], quats=fields['quats'],
+      opacity_logits=fields['opacity_logits'],
+      sh=jnp.concatenate([fields['sh_dc'], fields['sh_rest']], axis=1), active=active)
+
+
+def init_params(config):
+  """A zero template of config.gs_capacity slots (all inactive): deserialising a round."""
+  n = config.gs_capacity
+  return params_lib.Gaussians(
+      means=jnp.zeros((n, 3), jnp.float32), log_scales=jnp.zeros((n, 3), jnp.float32),
+      quats=jnp.zeros((n, 4), jnp.float32), opacity_logits=jnp.zeros((n,), jnp.float32),
+      sh=jnp.zeros((n, params_lib.NUM_SH, 3), jnp.float32), active=jnp.zeros((n,), bool))
+
+
+def world_box(scene):
+  """The scene's world-space box (lo [3], hi [3]) where random Gaussians are placed.
+
+  Scene.world_bounds; without it, Scene.bbox when the scene is not in NDC.
+  """
+  if scene.world_bounds is not None:
+    lo, hi = scene.world_bounds
+  elif not scene.use_ndc:
+    lo, hi = scene.bbox
+  else:
+    raise ValueError(f'scene {scene.name!r} is in NDC and has no Scene.world_bounds: '
+                     'Gaussians need a world-space box')
+  return np.asarray(lo, np.float32), np.asarray(hi, np.float32)
+
+
+def init_gaussians(config, scene, key):
+  """config.gs_init_points random grey Gaussians uniform in the scene's world box.
+
+  No SfM points: params.random_init (isotropic, scale = the points' spacing, opacity
+  config.gs_init_opacity) in a capacity of config.gs_capacity slots.
+  """
+  lo, hi = world_box(scene)
+  return params_lib.random_init(key, config.gs_init_points, lo, hi,
+                                capacity=config.gs_capacity,
+                                init_opacity=config.gs_init_opacity)
+
+
+def scene_extent(config, scene):
+  """The scene extent of the learning rates and the densification sizes.
+
+  Config.gs_extent when > 0, else 3DGS's: 1.1 x the largest distance of a training
+  camera centre from their mean (1.0 with a single training view).
+  """
+  if config.gs_extent > 0:
+    return float(config.gs_extent)
+  centres = np.asarray(scene.poses, np.float64)[np.asarray(scene.train_idx), :3, 3]
+  radius = 1.1 * float(np.max(np.linalg.norm(centres - centres.mean(0), axis=-1)))
+  return radius if radius > 0 else 1.
+
+
+# ------------------------------------------------------------------------- schedules
+
+
+def means_lr(iteration, config, extent):
+  """Position lr at a 1-based iteration: extent x log-linear gs_lr_means_init -> _final
+  over max_steps (3DGS's get_expon_lr_func without delay)."""
+  return extent * regularizers.log_lerp(iteration, config.gs_lr_means_init,
+                                        config.gs_lr_means_final, config.max_steps)
+
+
+def base_learning_rates(config, extent):
+  """{field: lr} at the start (the position lr is then set every step)."""
+  return {'means': extent * config.gs_lr_means_init, 'log_scales': config.gs_lr_scales,
+          'quats': config.gs_lr_quats, 'opacity_logits': config.gs_lr_opacity,
+          'sh_dc': config.gs_lr_sh_dc, 'sh_rest': config.gs_lr_sh_rest}
+
+
+def steps_of(frac, config, minimum=0):
+  """round(frac * max_steps), at least `minimum`."""
+  return max(int(round(frac * config.max_steps)), minimum)
+
+
+def sh_interval(config):
+  return steps_of(config.gs_sh_interval_frac, config, 1)
+
+
+def sh_degree_at(iteration, config):
+  """SH degree at a 1-based iteration: +1 every sh_interval iterations, at most 3 (works
+  on Python ints and traced arrays)."""
+  return jnp.minimum(iteration // sh_interval(config), 3)
+
+
+def densify_schedule(config):
+  """(from, until, every, opacity_reset_every) in steps."""
+  return (steps_of(config.gs_densify_from_frac, config),
+          steps_of(config.gs_densify_until_frac, config),
+          steps_of(config.gs_densify_every_frac, config, 1),
+          steps_of(config.gs_opacity_reset_every_frac, config, 1))
+
+
+def make_optimizer(config, extent):
+  """Per-field Adam (optax.multi_transform), 3DGS's learning rates, eps 1e-15.
+
+  Each group's lr is an injected hyperparameter; train_step sets the position's from the
+  step (set_means_lr), so the decay follows the step even across skipped updates.
+  """
+  lrs = base_learning_rates(config, extent)
+  groups = {k: optax.inject_hyperparams(optax.adam)(learning_rate=lrs[k], eps=ADAM_EPS)
+            for k in FIELDS}
+  return optax.multi_transform(groups, {k: k for k in FIELDS})
+
+
+def set_means_lr(opt_state, lr):
+  """The multi_transform state with the position group's learning rate set to lr."""
+  masked = opt_state.inner_states['means']
+  inject = masked.inner_state
+  hp = dict(inject.hyperparams, learning_rate=jnp.asarray(
+      lr, inject.hyperparams['learning_rate'].dtype))
+  inner = dict(opt_state.inner_states, means=masked._replace(
+      inner_state=inject._replace(hyperparams=hp)))
+  return opt_state._replace(inner_states=inner)
+
+
+def strong_types(tree):
+  """Copies of a pytree's arrays without weak types (params.random_init's opacities
+  are weakly typed; a step's outputs are not, and a change would recompile the step)."""
+  return jax.tree_util.tree_map(lambda x: jnp.array(x, dtype=jnp.asarray(x).dtype), tree)
+
+
+def init_state(config, params, extent) -> GaussianTrainState:
+  """A fresh train state of the given Gaussians (own, strongly typed copies)."""
+  params = strong_types(params)
+  opt_state = make_optimizer(config, extent).init(to_fields(params))
+  zero = lambda: jnp.zeros((), jnp.int32)  # Distinct buffers: the steps donate them.
+  return GaussianTrainState(step=zero(), params=params, opt_state=opt_state,
+                            nan_skips=zero(),
+                            stats=density.init_stats(params.means.shape[0]),
+                            dropped=zero(), pseudo_images=zero())
+
+
+# ------------------------------------------------------------------------- loss, step
+
+
+def _blur_valid(x, taps):
+  """Separable 'valid' filtering of [H, W, C] by `taps` along H and W."""
+  for axis in (0, 1):
+    n_out = x.shape[axis] - len(taps) + 1
+    x = sum(float(w) * jax.lax.slice_in_dim(x, k, k + n_out, axis=axis)
+            for k, w in enumerate(taps))
+  return x
+
+
+def masked_ssim_map(img0, img1, mask):
+  """SSIM map of metrics.ssim_map (11x11 Gaussian window, sigma 1.5, 'valid') whose
+  local statistics are weighted by a pixel mask: a pixel of weight 0 enters no window.
+
+  Each window's means, variances and covariance are mask-weighted averages (normalised
+  by the window's mask weight); with an all-ones mask this is metrics.ssim_map. Windows
+  centred on a pixel of weight 0 are excluded (weight 0 and no gradient, even where the
+  rest of the window is masked too).
+
+  Args:
+    img0, img1: [H, W, 3] (H, W >= 11). mask: [H, W] weights in [0, 1].
+
+  Returns:
+    (ssim [H - 10, W - 10, 3], weight [H - 10, W - 10, 1]: the centre pixels' mask).
+  """
+  taps = metrics.gaussian_kernel_1d(metrics.SSIM_FILTER_SIZE, metrics.SSIM_FILTER_SIGMA)
+  r = (len(taps) - 1) // 2
+  m = mask[..., None]
+  centre = m[r:m.shape[0] - r, r:m.shape[1] - r]
+  use = centre > 0.
+  bm = _blur_valid(m, taps)
+  safe = lambda x, fill: jnp.where(use, x, fill)
+  norm = safe(bm, 1.)
+
+  def avg(x):  # Mask-weighted local mean; constants outside `use` (no gradient there).
+    return safe(_blur_valid(m * x, taps), 0.) / norm
+
+  mu0, mu1 = avg(img0), avg(img1)
+  s00 = jnp.maximum(0., avg(img0**2) - mu0**2)
+  s11 = jnp.maximum(0., avg(img1**2) - mu1**2)
+  s01 = avg(img0 * img1) - mu0 * mu1
+  c1, c2 = metrics.SSIM_K1**2, metrics.SSIM_K2**2
+  ssim = ((2. * mu0 * mu1 + c1) * (2. * s01 + c2) /
+          ((mu0**2 + mu1**2 + c1) * (s00 + s11 + c2)))
+  return ssim, centre
+
+
+def image_loss(rgb, target, mask, lambda_dssim):
+  """(1 - l) L1 + l (1 - SSIM) of a rendered image, pixels weighted by a mask.
+
+  L1 = mean(m |rgb - target|) over all pixels and channels; 1 - SSIM = the mean over
+  the SSIM map of w (1 - SSIM) (masked_ssim_map: a pixel of weight 0 enters no window,
+  and windows centred on one count 0). A pixel of weight 0 thus enters neither term nor
+  any gradient, whatever its rendered or target colour; an all-zero mask gives loss 0
+  and zero gradients. Pixels keep the weight of a real view's pixels (no
+  renormalisation by the mask's sum), as a pseudo-view's usable pixels join the
+  training pixels.
+
+  Args:
+    rgb, target: [H, W, 3] (H, W >= 11). mask: [H, W] weights in [0, 1].
+    lambda_dssim: weight of the SSIM term.
+
+  Returns:
+    (loss, masked MSE) scalars; the MSE is sum(m (rgb - target)^2) / (3 sum(m)).
+  """
+  m = mask[..., None]
+  l1 = jnp.mean(m * jnp.abs(rgb - target))
+  ssim, weight = masked_ssim_map(rgb, target, mask)
+  dssim = jnp.sum(weight * (1. - ssim)) / ssim.size
+  loss = (1. - lambda_dssim) * l1 + lambda_dssim * dssim
+  mse = jnp.sum(m * (rgb - target)**2) / jnp.maximum(3. * jnp.sum(m), 1e-8)
+  return loss, mse
+
+
+def sh_mask(degree):
+  """[16, 1] float: 1 for the coefficients of SH degree <= `degree` (traced int)."""
+  return (jnp.arange(params_lib.NUM_SH) < (degree + 1)**2).astype(jnp.float32)[:, None]
+
+
+def render_for_loss(config, cam, params, fields, offset, pose, degree):
+  """Render of the Gaussians `fields` (active as params) at pose with SH degree `degree`."""
+  g = from_fields(fields, params.active)
+  g = g.replace(sh=g.sh * sh_mask(degree))
+  return render_lib.render(g, pose, cam.focal, cam.h, cam.w, 3,
+                           jnp.asarray(config.gs_background, jnp.float32),
+                           config.gs_tile_cap, NEAR, TILE, means2d_offset=offset)
+
+
+def loss_and_grads(config, cam, params, image, pose, mask, degree):
+  """Loss, its gradients and the screen-space gradients of one image.
+
+  Args:
+    config, cam: static. params: Gaussians. image: [H, W, 3]. pose: [3, 4].
+    mask: [H, W] pixel weights. degree: SH degree (traced int).
+
+  Returns:
+    (loss, mse, render dict, grads {field: array} (to_fields layout), grad2d [N, 2]).
+  """
+  fields = to_fields(params)
+  offset = jnp.zeros((params.means.shape[0], 2), params.means.dtype)
+
+  def fn(fields, offset):
+    out = render_for_loss(config, cam, params, fields, offset, pose, degree)
+    loss, mse = image_loss(out['rgb'], image, mask, config.gs_lambda_dssim)
+    return loss, (mse, out)
+
+  (loss, (mse, out)), (grads, grad2d) = jax.value_and_grad(fn, argnums=(0, 1),
+                                                           has_aux=True)(fields, offset)
+  return loss, mse, out, grads, grad2d
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2), donate_argnums=(3,))
+def train_step(config, cam: Camera, pseudo_on: bool, state: GaussianTrainState, data,
+               extent, key):
+  """One optimisation step on one image.
+
+  Args:
+    config: static Config. cam: static Camera.
+    pseudo_on: static; `data` holds the pseudo-views after the real views (only a flag
+      for the compiled variant: the draw is uniform over data's images either way).
+    state: GaussianTrainState.
+    data: {'images' [V, H, W, 3], 'poses' [V, 3, 4], 'masks' [V, H, W],
+      'is_pseudo' [V] bool}.
+    extent: scene extent (scalar).
+    key: PRNG key of this step.
+
+  Returns:
+    (new state, stats). A non-finite loss or gradient leaves params and optimizer state
+    unchanged and increments state.nan_skips; an image with no pixel weight (an all-zero
+    mask) leaves them unchanged too (nothing to learn from it).
+  """
+  del pseudo_on  # The variants differ in data's shapes.
+  n_views = data['images'].shape[0]
+  idx = jax.random.randint(key, (), 0, n_views)
+  image, pose, mask = data['images'][idx], data['poses'][idx], data['masks'][idx]
+  iteration = state.step + 1
+  degree = sh_degree_at(iteration, config)
+  params = state.params
+  loss, mse, out, grads, grad2d = loss_and_grads(config, cam, params, image, pose, mask,
+                                                 degree)
+  finite = (jnp.isfinite(loss) & jnp.all(jnp.isfinite(grad2d)) & jnp.all(jnp.array(
+      [jnp.all(jnp.isfinite(g)) for g in jax.tree_util.tree_leaves(grads)])))
+  informative = jnp.sum(mask) > 0.
+  apply = finite & informative
+  lr = means_lr(iteration.astype(jnp.float32), config, extent)
+  fields = to_fields(params)
+  opt_state = set_means_lr(state.opt_state, lr)
+  updates, new_opt = make_optimizer(config, extent).update(grads, opt_state, fields)
+  new_fields = optax.apply_updates(fields, updates)
+  keep = lambda new, old: jnp.where(apply, new, old)
+  new_fields = jax.tree_util.tree_map(keep, new_fields, fields)
+  new_opt = jax.tree_util.tree_map(keep, new_opt, state.opt_state)
+  _, until, _, _ = densify_schedule(config)
+  stats = density.accumulate(state.stats, grad2d, out['radius'], cam.h, cam.w,
+                             on=apply & (iteration < until))
+  is_pseudo = data['is_pseudo'][idx]
+  step_stats = {'loss': loss, 'mse': mse, 'psnr': metrics.mse_to_psnr(mse), 'lr': lr,
+                'finite': finite, 'sh_degree': degree, 'cap_bound': out['cap_bound'],
+                'image': idx, 'is_pseudo': is_pseudo,
+                'pseudo_rays': jnp.where(is_pseudo, jnp.sum(mask), 0.)}
+  new_state = GaussianTrainState(
+      step=iteration, params=from_fields(new_fields, params.active), opt_state=new_opt,
+      nan_skips=state.nan_skips + jnp.where(finite, 0, 1), stats=stats,
+      dropped=state.dropped, pseudo_images=state.pseudo_images + is_pseudo.astype(
+          jnp.int32))
+  return new_state, step_stats
+
+
+@functools.partial(jax.jit, static_argnums=(0,), donate_argnums=(1,))
+def densify_state(config, state: GaussianTrainState, extent, key, prune_big):
+  """density.densify_and_prune on the state: new slots get zero Adam moments, the
+  statistics restart from zero. Returns (state, info)."""
+  g, reset, info = density.densify_and_prune(
+      state.params, state.stats, key, config.gs_grad_threshold, config.gs_percent_dense,
+      extent, config.gs_min_opacity, prune_big)
+  opt_state = density.reset_adam_moments(state.opt_state, reset)
+  return state.replace(params=g, opt_state=opt_state,
+                       stats=density.init_stats(g.means.shape[0]),
+                       dropped=state.dropped + info['dropped']), info
+
+
+@functools.partial(jax.jit, donate_argnums=(0,))
+def opacity_reset_state(state: GaussianTrainState):
+  """density.reset_opacity, with the opacity's Adam moments zeroed for every slot."""
+  n = state.params.means.shape[0]
+  opt_state = density.reset_adam_moments(state.opt_state, jnp.ones((n,), bool),
+                                         fields=('opacity_logits',))
+  return state.replace(params=density.reset_opacity(state.params), opt_state=opt_state)
+
+
+def training_data(scene, pseudo=None):
+  """Device arrays of the views a step draws from: the real training views, then the
+  pseudo-views (masks of real views are all ones)."""
+  idx = np.asarray(scene.train_idx)
+  n = len(idx)
+  data = {'images': jnp.asarray(scene.images[idx], jnp.float32),
+          'poses': jnp.asarray(scene.poses[idx], jnp.float32),
+          'masks': jnp.ones((n, scene.height, scene.width), jnp.float32),
+          'is_pseudo': jnp.zeros((n,), bool)}
+  if pseudo is None:
+    return data
+  m = pseudo.images.shape[0]
+  extra = {'images': jnp.asarray(pseudo.images, jnp.float32),
+           'poses': jnp.asarray(pseudo.poses, jnp.float32),
+           'masks': jnp.asarray(pseudo.masks, jnp.float32),
+           'is_pseudo': jnp.ones((m,), bool)}
+  return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), data, extra)
+
+
+# ------------------------------------------------------------------------- the loop
+
+
+def _meta_template():
+  return {'train_seconds': np.zeros((), np.float64)}
+
+
+def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=None,
+                    eval_fn=None, time_offset: float = 0., desc: str = 'train',
+                    show_progress: bool = True) -> TrainResult:
+  """Trains a fresh Gaussian scene (or resumes the one in out_dir) for max_steps steps.
+
+  Args:
+    config: Config. scene: Scene (images, poses, camera, world box).
+    out_dir: directory of checkpoints and log.jsonl (resumed when checkpoints exist);
+      None trains in memory (no checkpoints, no log).
+    pseudo: None or a pseudo_views.PseudoViews (images, poses, masks).
+    window: (start, end): pseudo-views are drawn for start <= step < end only.
+    init_params: start from these Gaussians instead of a random initialisation.
+    eval_fn: optional Gaussians -> test PSNR (cheap), called every config.eval_every
+      steps.
+    time_offset: seconds added to logged times (cumulative time over rounds).
+    desc: progress-bar label. show_progress: draw the bar.
+
+  Returns:
+    training.TrainResult whose state is a GaussianTrainState.
+  """
+  cam = Camera.of(scene)
+  extent = scene_extent(config, scene)
+  extent_arr = jnp.asarray(extent, jnp.float32)
+  has_pseudo = pseudo is not None and window[1] > window[0]
+  base_key = jax.random.PRNGKey(config.seed)
+  k_init, base_key = jax.random.split(base_key)
+  params = init_gaussians(config, scene, k_init) if init_params is None else init_params
+  template = {'state': init_state(config, params, extent), 'meta': _meta_template()}
+  state, train_seconds, curve = template['state'], 0., []
+  if out_dir is not None:
+    ckpt_dir = os.path.join(out_dir, 'checkpoints')
+    log_path = os.path.join(out_dir, 'log.jsonl')
+    restored = rundir.restore_checkpoint(ckpt_dir, template)
+    if restored is None:
+      if os.path.exists(log_path):
+        os.remove(log_path)
+    else:
+      state, train_seconds = restored['state'], float(restored['meta']['train_seconds'])
+      rundir.truncate_jsonl(log_path, int(state.step))
+    curve = [r for r in rundir.read_jsonl(log_path) if 'eval_psnr' in r]
+  # Own copies: the jitted steps donate the state, never the caller's init_params.
+  state = strong_types(state)
+  data = {False: training_data(scene)}
+  if has_pseudo:
+    data[True] = training_data(scene, pseudo)
+  d_from, d_until, d_every, reset_every = densify_schedule(config)
+  start = int(state.step)
+  bar = progress_bar(total=config.max_steps, initial=start, desc=desc,
+                     disable=not show_progress)
+  t_last = time.perf_counter()
+
+  def save(state, secs):
+    if out_dir is not None:
+      rundir.save_checkpoint(ckpt_dir, {'state': state, 'meta': {
+          'train_seconds': np.asarray(secs, np.float64)}}, int(state.step))
+
+  for step in range(start, config.max_steps):
+    pseudo_on = has_pseudo and window[0] <= step < window[1]
+    k_step, k_dens = jax.random.split(jax.random.fold_in(base_key, step))
+    state, stats = train_step(config, cam, pseudo_on, state, data[pseudo_on], extent_arr,
+                              k_step)
+    done = step + 1  # The reference's 1-based iteration.
+    if done < d_until:
+      if done > d_from and done % d_every == 0:
+        state, _ = densify_state(config, state, extent_arr, k_dens,
+                                 jnp.asarray(done > reset_every))
+      if done % reset_every == 0:
+        state = opacity_reset_state(state)
+    bar.update(1)
+    log_now = done % config.print_every == 0 or done == config.max_steps
+    eval_now = eval_fn is not None and config.eval_every > 0 and (
+        done % config.eval_every == 0 or done == config.max_steps)
+    ckpt_now = done % config.checkpoint_every == 0 or done == config.max_steps
+    if log_now or eval_now or ckpt_now:
+      stats = jax.device_get(stats)
+      now = time.perf_counter()
+      train_seconds += now - t_last
+      rec = {'step': done, 'train_seconds': train_seconds,
+             'time': time_offset + train_seconds, 'loss': float(stats['loss']),
+             'psnr': float(stats['psnr']), 'lr': float(stats['lr']),
+             'nan_skips': int(state.nan_skips), 'pseudo_rays': int(stats['pseudo_rays']),
+             'pseudo_images': int(state.pseudo_images),
+             'num_gaussians': int(jnp.sum(state.params.active)),
+             'cap_bound': float(stats['cap_bound']), 'dropped': int(state.dropped),
+             'sh_degree': int(stats['sh_degree'])}
+      if eval_now:
+        rec['eval_psnr'] = float(eval_fn(state.params))
+        curve.append(rec)
+      bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}",
+                      n=rec['num_gaussians'],
+                      **({'test': f"{rec['eval_psnr']:.2f}"} if eval_now else {}))
+      if out_dir is not None:
+        rundir.append_jsonl(log_path, rec)
+      if ckpt_now:
+        save(state, train_seconds)
+      t_last = time.perf_counter()
+  bar.close()
+  return TrainResult(state=state, train_seconds=train_seconds, curve=curve)
+
+
+# ------------------------------------------------------------------------- rendering
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _render_one(config, cam, params, pose):
+  out = render_lib.render(params, pose, cam.focal, cam.h, cam.w, 3,
+                          jnp.asarray(config.gs_background, jnp.float32),
+                          config.gs_tile_cap, NEAR, TILE)
+  acc = out['acc']
+  depth = jnp.where(acc > 0., out['depth'] / jnp.where(acc > 0., acc, 1.), 0.)
+  return {'rgb': out['rgb'], 'depth': depth, 'acc': acc}
+
+
+def render_views(config, scene, params, poses, show_progress=False):
+  """Renders the Gaussians at camera poses with SH degree 3 and the config's background.
+
+  Args:
+    config: Config. scene: Scene (its camera). params: Gaussians. poses: [N, 3, 4].
+    show_progress: draw a progress bar.
+
+  Returns:
+    {'rgb': [N, H, W, 3], 'depth': [N, H, W] expected depth (weighted depth / acc where
+    acc > 0, else 0), 'acc': [N, H, W]} numpy float32.
+  """
+  cam = Camera.of(scene)
+  poses = np.asarray(poses, np.float32)
+  outs = []
+  bar = progress_bar(total=len(poses), desc='render', disable=not show_progress,
+                     unit='view')
+  for pose in poses:
+    outs.append(jax.device_get(_render_one(config, cam, params, jnp.asarray(pose))))
+    bar.update(1)
+  bar.close()
+  if not outs:
+    return {'rgb': np.zeros((0, cam.h, cam.w, 3), np.float32),
+            'depth': np.zeros((0, cam.h, cam.w), np.float32),
+            'acc': np.zeros((0, cam.h, cam.w), np.float32)}
+  return {k: np.stack([np.asarray(o[k], np.float32) for o in outs]) for k in outs[0]}

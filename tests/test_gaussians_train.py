@@ -1,0 +1,480 @@
+"""Training Gaussians: density control, optimiser, schedules, the loop, ply export."""
+import dataclasses
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from conftest import tiny_config
+from renerf_jax import metrics, rundir
+from renerf_jax.datasets import load_scene
+from renerf_jax.gaussians import density
+from renerf_jax.gaussians import params as params_lib
+from renerf_jax.gaussians import ply
+from renerf_jax.gaussians import render as render_lib
+from renerf_jax.gaussians import training as gtrain
+from renerf_jax.pseudo_views import PseudoViews
+
+STEPS = 120
+# One Config for every test that compiles the train step (the Config is a static
+# argument: each distinct one compiles anew). Higher colour / position lrs than 3DGS so
+# 120 steps show progress; densify every 12 steps from 12 to 96, no opacity reset in
+# the run (tested on its own), the tile cap loose at this image size.
+CFG = tiny_config(procedural_size=(24, 32), max_steps=STEPS, print_every=1,
+                  checkpoint_every=60, eval_every=40, gs_capacity=1536,
+                  gs_init_points=512, gs_tile_cap=512, gs_densify_from_frac=0.1,
+                  gs_densify_until_frac=0.8, gs_densify_every_frac=0.1,
+                  gs_opacity_reset_every_frac=1., gs_sh_interval_frac=0.25,
+                  gs_lr_sh_dc=0.03, gs_lr_scales=0.01, gs_lr_means_init=1e-2,
+                  gs_lr_means_final=1e-3)
+
+
+@pytest.fixture(scope='module')
+def scene():
+  return load_scene(CFG)
+
+
+@pytest.fixture(scope='module')
+def full_run(scene, tmp_path_factory):
+  out = str(tmp_path_factory.mktemp('gs') / 'a')
+  return out, gtrain.train_gaussians(CFG, scene, out, None, eval_fn=lambda p: 1.,
+                                     show_progress=False)
+
+
+def _psnr(a, b):
+  return float(-10. * np.log10(np.mean((np.asarray(a) - np.asarray(b))**2)))
+
+
+def _gaussians(n, capacity, seed=0):
+  """n random visible active Gaussians in front of the identity-ish test camera."""
+  rng = np.random.default_rng(seed)
+  f = lambda x: jnp.asarray(x, jnp.float32)
+  sh = 0.1 * rng.normal(size=(capacity, 16, 3))
+  return params_lib.Gaussians(
+      means=f(np.c_[rng.uniform(-0.5, 0.5, (capacity, 2)), rng.uniform(-4., -2.,
+                                                                      capacity)]),
+      log_scales=f(rng.uniform(-2.5, -1.5, (capacity, 3))),
+      quats=f(rng.normal(size=(capacity, 4))),
+      opacity_logits=f(rng.uniform(-1., 2., capacity)), sh=f(sh),
+      active=jnp.arange(capacity) < n)
+
+
+_POSE = jnp.asarray(np.eye(4)[:3], jnp.float32)  # At the origin, looking down -z.
+_CAM = gtrain.Camera(24, 32, 30.)
+_N = 18  # Slots of the hand-made scenes of the loss tests (one compilation).
+_loss_and_grads = jax.jit(gtrain.loss_and_grads, static_argnums=(0, 1))
+
+
+# ----------------------------------------------------------------------------- density
+
+
+def _hand_built():
+  """8 slots, 5 active: 0 small + high grad (clone), 1 large + higher grad (split),
+  2 low grad, 3 transparent (pruned), 4 low grad but 25 px on screen; 5..7 free."""
+  n = 8
+  g = _gaussians(5, n)
+  log_s = np.full((n, 3), np.log(0.05), np.float32)
+  log_s[0] = np.log(0.005)
+  logits = np.zeros(n, np.float32)
+  logits[3] = -8.  # opacity 3e-4 < 0.005
+  g = g.replace(log_scales=jnp.asarray(log_s), opacity_logits=jnp.asarray(logits))
+  stats = density.DensityStats(
+      grad_accum=jnp.asarray([3e-3, 8e-3, 1e-5, 0., 0., 9., 9., 9.], jnp.float32),
+      count=jnp.asarray([3., 2., 1., 1., 1., 0., 0., 0.], jnp.float32),
+      max_radii=jnp.asarray([3., 9., 9., 2., 25., 0., 0., 0.], jnp.float32))
+  return g, stats
+
+
+def test_clone_split_prune_select_the_expected_slots():
+  g, stats = _hand_built()
+  key = jax.random.PRNGKey(3)
+  fn = jax.jit(density.densify_and_prune)
+  new, reset, info = fn(g, stats, key, 5e-4, 0.01, 1., 0.005, False)
+  assert {k: int(v) for k, v in info.items()} == {
+      'clone': 1, 'split': 1, 'pruned': 1, 'dropped': 0, 'active': 6}
+  np.testing.assert_array_equal(new.active, [1, 1, 1, 0, 1, 1, 1, 0])
+  np.testing.assert_array_equal(reset, [0, 1, 0, 1, 0, 1, 1, 0])
+  # Slot 5 (first free) holds the higher-gradient candidate's second split sample,
+  # slot 6 an exact copy of slot 0.
+  for k in ('means', 'log_scales', 'quats', 'opacity_logits', 'sh'):
+    np.testing.assert_array_equal(getattr(new, k)[6], getattr(g, k)[0])
+    for s in (0, 2, 4):
+      np.testing.assert_array_equal(getattr(new, k)[s], getattr(g, k)[s])
+  small = np.log(0.05) - np.log(1.6)
+  np.testing.assert_allclose(new.log_scales[1], small, rtol=1e-6)
+  np.testing.assert_allclose(new.log_scales[5], small, rtol=1e-6)
+  for k in ('quats', 'opacity_logits', 'sh'):
+    np.testing.assert_array_equal(getattr(new, k)[5], getattr(g, k)[1])
+  # The two samples are distinct draws from the parent (std 0.05 per axis).
+  d1, d5 = np.asarray(new.means[1] - g.means[1]), np.asarray(new.means[5] - g.means[1])
+  assert 0. < np.abs(d1).max() < 0.3 and 0. < np.abs(d5).max() < 0.3
+  assert not np.allclose(d1, d5)
+  # After the first opacity reset, slot 4 (25 px > 20 px on screen) goes too.
+  new_b, reset_b, info_b = fn(g, stats, key, 5e-4, 0.01, 1., 0.005, True)
+  assert int(info_b['pruned']) == 2 and not bool(new_b.active[4]) and bool(reset_b[4])
+  # ... and with a small extent every Gaussian larger than 0.1 extent is pruned.
+  new_c, _, _ = fn(g, stats, key, 5e-4, 0.01, 0.3, 0.005, True)
+  assert np.flatnonzero(new_c.active).tolist() == [0, 6]
+
+
+def test_densify_keeps_shapes_and_dtypes():
+  g, stats = _hand_built()
+  new, reset, info = jax.jit(density.densify_and_prune)(
+      g, stats, jax.random.PRNGKey(0), 5e-4, 0.01, 1., 0.005, True)
+  for a, b in zip(jax.tree_util.tree_leaves(g), jax.tree_util.tree_leaves(new)):
+    assert a.shape == b.shape and a.dtype == b.dtype
+  assert reset.shape == (8,) and reset.dtype == bool
+  assert all(v.shape == () and v.dtype == jnp.int32 for v in info.values())
+
+
+def test_full_capacity_takes_the_highest_gradients_and_reports_the_rest():
+  n = 6
+  g = _gaussians(4, n).replace(log_scales=jnp.full((n, 3), np.log(0.005), jnp.float32),
+                               opacity_logits=jnp.zeros((n,), jnp.float32))
+  grads = jnp.asarray([1e-3, 4e-3, 2e-3, 3e-3, 0., 0.], jnp.float32)
+  stats = density.DensityStats(grad_accum=grads, count=jnp.ones((n,), jnp.float32),
+                               max_radii=jnp.zeros((n,), jnp.float32))
+  new, reset, info = density.densify_and_prune(g, stats, jax.random.PRNGKey(0), 5e-4,
+                                               0.01, 1., 0.005)
+  assert int(info['dropped']) == 2 and int(info['clone']) == 2
+  assert bool(new.active.all())
+  # Slot 4 <- slot 1 (4e-3), slot 5 <- slot 3 (3e-3); slots 0 and 2 are not cloned.
+  np.testing.assert_array_equal(new.means[4], g.means[1])
+  np.testing.assert_array_equal(new.means[5], g.means[3])
+  np.testing.assert_array_equal(reset, [0, 0, 0, 0, 1, 1])
+
+
+def test_accumulate_uses_ndc_units_and_visible_views_only():
+  stats = density.init_stats(3)
+  grad2d = jnp.asarray([[1., 0.], [0., 2.], [5., 5.]], jnp.float32)
+  radius = jnp.asarray([3., 4., 0.], jnp.float32)
+  s = density.accumulate(stats, grad2d, radius, 24, 32)
+  s = density.accumulate(s, grad2d * 0., radius, 24, 32)
+  np.testing.assert_allclose(s.grad_accum, [16., 24., 0.])
+  np.testing.assert_array_equal(s.count, [2., 2., 0.])
+  np.testing.assert_array_equal(s.max_radii, [3., 4., 0.])
+  np.testing.assert_allclose(density.mean_grads(s), [8., 12., 0.])
+  off = density.accumulate(s, grad2d, radius, 24, 32, on=False)
+  np.testing.assert_array_equal(off.count, s.count)
+
+
+def test_adam_moments_reset_for_changed_slots_and_opacity_reset():
+  g, stats = _hand_built()
+  state = gtrain.init_state(CFG, g, 1.)
+  ones = jax.tree_util.tree_map(
+      lambda x: jnp.ones_like(x) if x.ndim and x.shape[0] == 8 else x, state.opt_state)
+  state = state.replace(opt_state=ones, stats=stats)
+  out, info = gtrain.densify_state(CFG, state, jnp.float32(1.), jax.random.PRNGKey(0),
+                                   jnp.asarray(False))
+  assert int(info['clone']) == 1 and int(info['split']) == 1
+  reset = np.array([0, 1, 0, 1, 0, 1, 1, 0], bool)
+  moments = [s for s in jax.tree_util.tree_leaves(
+      out.opt_state, is_leaf=lambda s: hasattr(s, 'mu')) if hasattr(s, 'mu')]
+  assert len(moments) == len(gtrain.FIELDS)
+  for s in moments:
+    assert int(s.count) == 0  # Adam's step count is kept.
+    for x in jax.tree_util.tree_leaves((s.mu, s.nu)):
+      x = np.asarray(x).reshape(8, -1)
+      assert np.all(x[reset] == 0.) and np.all(x[~reset] == 1.)
+  assert float(out.stats.count.sum()) == 0. and int(out.dropped) == 0
+  # Opacity reset: clamped to 0.01, the opacity moments zeroed, the others kept.
+  g, _ = _hand_built()  # (densify_state donated the first one.)
+  st = gtrain.init_state(CFG, g.replace(opacity_logits=jnp.linspace(-6., 3., 8)), 1.)
+  st = st.replace(opt_state=jax.tree_util.tree_map(
+      lambda x: jnp.ones_like(x) if x.ndim and x.shape[0] == 8 else x, st.opt_state))
+  before = np.asarray(st.params.opacity_logits)
+  st = gtrain.opacity_reset_state(st)
+  op = np.asarray(jax.nn.sigmoid(st.params.opacity_logits))
+  assert np.all(op <= 0.01 + 1e-7)
+  keep = jax.nn.sigmoid(before) < 0.01
+  np.testing.assert_array_equal(np.asarray(st.params.opacity_logits)[keep], before[keep])
+  inner = st.opt_state.inner_states
+  for name in gtrain.FIELDS:
+    adam = inner[name].inner_state.inner_state[0]
+    want = 0. if name == 'opacity_logits' else 1.
+    assert np.all(np.asarray(adam.mu[name]) == want), name
+    assert np.all(np.asarray(adam.nu[name]) == want), name
+
+
+# ----------------------------------------------------------------------------- schedules
+
+
+def test_learning_rates_and_sh_schedule():
+  cfg = tiny_config(max_steps=30000)
+  ext = 2.5
+  np.testing.assert_allclose(gtrain.means_lr(0, cfg, ext), 2.5 * 1.6e-4, rtol=1e-6)
+  np.testing.assert_allclose(gtrain.means_lr(15000, cfg, ext), 2.5 * 1.6e-5, rtol=1e-5)
+  np.testing.assert_allclose(gtrain.means_lr(30000, cfg, ext), 2.5 * 1.6e-6, rtol=1e-5)
+  np.testing.assert_allclose(gtrain.means_lr(40000, cfg, ext), 2.5 * 1.6e-6, rtol=1e-5)
+  lrs = gtrain.base_learning_rates(cfg, ext)
+  want = {'means': 4e-4, 'sh_dc': 2.5e-3, 'sh_rest': 1.25e-4, 'opacity_logits': 0.05,
+          'log_scales': 5e-3, 'quats': 1e-3}
+  assert lrs.keys() == want.keys()
+  for k, v in want.items():
+    np.testing.assert_allclose(lrs[k], v, rtol=1e-12)
+  assert gtrain.ADAM_EPS == 1e-15
+  # 3DGS: +1 degree every 1000 iterations (1-based), up to 3; densify 500..15000 / 100.
+  degrees = [int(gtrain.sh_degree_at(i, cfg)) for i in (1, 999, 1000, 1999, 2000, 3000,
+                                                        29000)]
+  assert degrees == [0, 0, 1, 1, 2, 3, 3]
+  assert gtrain.densify_schedule(cfg) == (500, 15000, 100, 3000)
+
+
+def test_sh_coefficients_above_the_degree_get_no_gradient():
+  g = _gaussians(_N, _N)
+  img = jnp.full((24, 32, 3), 0.3, jnp.float32)
+  mask = jnp.ones((24, 32), jnp.float32)
+  for degree, used in ((0, 1), (1, 4), (3, 16)):
+    _, _, _, grads, _ = _loss_and_grads(CFG, _CAM, g, img, _POSE, mask, degree)
+    sh = np.concatenate([np.asarray(grads['sh_dc']), np.asarray(grads['sh_rest'])], 1)
+    assert np.abs(sh[:, :used]).max() > 0.
+    assert np.all(sh[:, used:] == 0.)
+
+
+# ----------------------------------------------------------------------------- loss
+
+
+def test_masked_pixels_do_not_enter_the_loss():
+  g = _gaussians(_N, _N)
+  rng = np.random.default_rng(1)
+  img = jnp.asarray(rng.uniform(size=(24, 32, 3)), jnp.float32)
+  mask = np.ones((24, 32), np.float32)
+  mask[5:15, 8:20] = 0.
+  other = np.asarray(img).copy()
+  other[5:15, 8:20] = 1. - other[5:15, 8:20]
+  f = lambda im, m: _loss_and_grads(CFG, _CAM, g, jnp.asarray(im), _POSE, jnp.asarray(m),
+                                    3)
+  a, b = f(img, mask), f(other, mask)
+  assert float(a[0]) == float(b[0])
+  jax.tree_util.tree_map(np.testing.assert_array_equal, a[3], b[3])
+  np.testing.assert_array_equal(a[4], b[4])
+  full = f(img, np.ones_like(mask))
+  assert float(full[0]) != float(a[0])
+  # With all weights 1 the masked SSIM is metrics.ssim_map.
+  ssim, w = gtrain.masked_ssim_map(full[2]['rgb'], img, jnp.ones((24, 32)))
+  np.testing.assert_allclose(ssim, metrics.ssim_map(full[2]['rgb'], img), atol=2e-6)
+  assert np.all(np.asarray(w) == 1.)
+  # An all-zero mask: no loss, no gradient of any field.
+  z = f(img, np.zeros_like(mask))
+  assert float(z[0]) == 0.
+  for x in jax.tree_util.tree_leaves((z[3], z[4])):
+    assert np.all(np.asarray(x) == 0.)
+
+
+def test_zero_mask_pseudo_view_step_changes_no_parameter(scene):
+  # Shapes of the pseudo-view run below (3 real + 2 pseudo): the same compiled step.
+  state = gtrain.init_state(CFG, gtrain.init_gaussians(CFG, scene, jax.random.PRNGKey(1)),
+                            1.)
+  data = {'images': jnp.full((5, 24, 32, 3), 0.7, jnp.float32),
+          'poses': jnp.asarray(scene.poses[:5]), 'masks': jnp.zeros((5, 24, 32)),
+          'is_pseudo': jnp.ones((5,), bool)}
+  params, opt = jax.device_get((state.params, state.opt_state))
+  new, stats = gtrain.train_step(CFG, gtrain.Camera.of(scene), True, state, data,
+                                 jnp.float32(1.), jax.random.PRNGKey(0))
+  jax.tree_util.tree_map(np.testing.assert_array_equal, params, new.params)
+  jax.tree_util.tree_map(np.testing.assert_array_equal, opt, new.opt_state)
+  assert int(new.step) == 1 and int(new.nan_skips) == 0 and int(new.pseudo_images) == 1
+  assert float(stats['pseudo_rays']) == 0. and float(new.stats.count.sum()) == 0.
+
+
+def test_inactive_slots_change_neither_image_nor_gradients():
+  n, extra = 12, 6
+  g = _gaussians(n, n + extra)
+  garbage = g.replace(means=g.means.at[n:].set(jnp.nan), sh=g.sh.at[n:].set(1e30),
+                      opacity_logits=g.opacity_logits.at[n:].set(40.))
+  visible = g.replace(active=jnp.ones(n + extra, bool))
+  img = jnp.full((24, 32, 3), 0.4, jnp.float32)
+  mask = jnp.ones((24, 32), jnp.float32)
+  f = lambda gg: _loss_and_grads(CFG, _CAM, gg, img, _POSE, mask, 3)
+  a, b, c = f(g), f(garbage), f(visible)
+  np.testing.assert_array_equal(a[2]['rgb'], b[2]['rgb'])
+  assert np.abs(np.asarray(a[2]['rgb'] - c[2]['rgb'])).max() > 1e-3
+  assert float(a[0]) == float(b[0])
+  for x, y in zip(jax.tree_util.tree_leaves((a[3], a[4])),
+                  jax.tree_util.tree_leaves((b[3], b[4]))):
+    np.testing.assert_array_equal(x, y)
+    assert np.all(np.asarray(x)[n:] == 0.)
+  assert np.abs(np.asarray(a[4][:n])).max() > 0.  # Screen-space gradients exist.
+
+
+def test_all_inactive_renders_the_background_with_zero_gradients():
+  g = _gaussians(0, _N)
+  img = jnp.full((24, 32, 3), 0.4, jnp.float32)
+  loss, mse, out, grads, grad2d = _loss_and_grads(
+      CFG, _CAM, g, img, _POSE, jnp.ones((24, 32), jnp.float32), 3)
+  assert np.all(np.asarray(out['rgb']) == 0.) and np.all(np.asarray(out['acc']) == 0.)
+  assert np.isfinite(float(loss)) and np.isfinite(float(mse)) and float(loss) > 0.
+  for x in jax.tree_util.tree_leaves((grads, grad2d)):
+    assert np.all(np.asarray(x) == 0.)
+  bg = jnp.asarray([0.2, 0.5, 0.9], jnp.float32)
+  plain = render_lib.render(g, _POSE, 30., 24, 32, 3, bg, 16,
+                            means2d_offset=jnp.zeros((_N, 2)))
+  np.testing.assert_array_equal(plain['rgb'], np.broadcast_to(bg, (24, 32, 3)))
+  views = gtrain.render_views(dataclasses.replace(CFG, gs_background=(0.2, 0.5, 0.9)),
+                              _Scene(), g, np.asarray(_POSE)[None])
+  np.testing.assert_allclose(views['rgb'][0], np.broadcast_to(bg, (24, 32, 3)))
+  assert np.all(views['depth'] == 0.) and np.all(views['acc'] == 0.)
+
+
+class _Scene:
+  """The camera of _CAM as a Scene would give it."""
+  height, width, focal = _CAM.h, _CAM.w, _CAM.focal
+
+
+# ----------------------------------------------------------------------------- training
+
+
+def test_training_raises_the_train_psnr(scene, full_run):
+  out, res = full_run
+  p0 = gtrain.init_gaussians(CFG, scene, jax.random.split(jax.random.PRNGKey(CFG.seed))[0])
+  poses, gt = scene.poses[scene.train_idx], scene.images[scene.train_idx]
+  before = _psnr(gtrain.render_views(CFG, scene, p0, poses)['rgb'], gt)
+  views = gtrain.render_views(CFG, scene, res.state.params, poses)
+  after = _psnr(views['rgb'], gt)
+  assert after > before + 3., (before, after)
+  assert views['depth'].shape == (3, 24, 32) and np.all(np.isfinite(views['depth']))
+  assert views['acc'].max() <= 1. and views['depth'].max() > 1.
+  s = res.state
+  assert int(s.step) == STEPS and int(s.nan_skips) == 0
+  assert int(s.params.active.sum()) > CFG.gs_init_points  # Densification added some.
+  recs = rundir.read_jsonl(os.path.join(out, 'log.jsonl'))
+  assert [r['step'] for r in recs] == list(range(1, STEPS + 1))
+  for key in ('step', 'train_seconds', 'time', 'loss', 'psnr', 'lr', 'nan_skips',
+              'pseudo_rays', 'num_gaussians', 'cap_bound'):
+    assert key in recs[-1], key
+  assert [r['step'] for r in res.curve] == [40, 80, 120]
+  assert recs[-1]['sh_degree'] == 3 and recs[0]['sh_degree'] == 0
+  assert recs[0]['cap_bound'] == 0. and 0. <= recs[-1]['cap_bound'] <= 1.
+  assert recs[-1]['pseudo_rays'] == 0 and recs[-1]['pseudo_images'] == 0
+
+
+def test_resume_is_bit_for_bit(scene, full_run, tmp_path, monkeypatch):
+  _, full = full_run
+  real_step, calls = gtrain.train_step, []
+
+  def step(*args, **kwargs):
+    calls.append(int(args[3].step))
+    if len(calls) == 71:
+      raise KeyboardInterrupt('killed at step 70')
+    return real_step(*args, **kwargs)
+  monkeypatch.setattr(gtrain, 'train_step', step)
+  out = str(tmp_path / 'b')
+  with pytest.raises(KeyboardInterrupt):
+    gtrain.train_gaussians(CFG, scene, out, None, show_progress=False)
+  assert [s for s, _ in rundir.list_checkpoints(os.path.join(out, 'checkpoints'))] == [60]
+  calls.clear()
+  resumed = gtrain.train_gaussians(CFG, scene, out, None, show_progress=False)
+  assert calls == list(range(60, STEPS))
+  jax.tree_util.tree_map(np.testing.assert_array_equal, jax.device_get(full.state),
+                         jax.device_get(resumed.state))
+  assert [r['step'] for r in rundir.read_jsonl(os.path.join(out, 'log.jsonl'))] == list(
+      range(1, STEPS + 1))
+
+
+def test_pseudo_views_are_drawn_only_inside_the_window(scene, tmp_path):
+  idx = scene.test_idx[:2]
+  masks = np.ones((2, 24, 32), np.float32)
+  masks[1, :, :16] = 0.
+  pseudo = PseudoViews(images=jnp.asarray(scene.images[idx]),
+                       poses=jnp.asarray(scene.poses[idx]), masks=jnp.asarray(masks),
+                       uncertainty=jnp.zeros((2, 24, 32), jnp.float32))
+  out = str(tmp_path / 'p')
+  res = gtrain.train_gaussians(CFG, scene, out, pseudo, window=(10, 40),
+                               show_progress=False)
+  recs = rundir.read_jsonl(os.path.join(out, 'log.jsonl'))
+  drawn = [r['step'] for r in recs if r['pseudo_rays'] > 0]
+  assert drawn and all(11 <= s <= 40 for s in drawn)  # Steps 10..39 (step = done).
+  assert {r['pseudo_rays'] for r in recs if r['pseudo_rays'] > 0} <= {768, 384}
+  counts = [r['pseudo_images'] for r in recs]
+  assert counts[9] == 0 and counts[-1] == counts[39] == len(drawn) == int(
+      res.state.pseudo_images)
+  assert 3 <= len(drawn) <= 24  # ~2/5 of 30 steps.
+
+
+def test_world_bounds_hold_the_scene_and_the_random_init(scene):
+  """The procedural scene's true surface points seen by the training views lie in
+  Scene.world_bounds (made from the training cameras only), where init_gaussians
+  spreads its Gaussians; the NDC bbox is unchanged."""
+  lo, hi = (np.asarray(b) for b in scene.world_bounds)
+  assert scene.bbox == ((-1.,) * 3, (1.,) * 3) and scene.use_ndc
+  h, w, f = scene.height, scene.width, scene.focal
+  ys, xs = np.mgrid[:h, :w] + 0.5
+  dirs = np.stack([(xs - w / 2) / f, -(ys - h / 2) / f, -np.ones_like(xs)], -1)
+  pts = np.concatenate([(dirs @ c2w[:3, :3].T) * d[..., None] + c2w[:3, 3]
+                        for c2w, d in zip(scene.poses[scene.train_idx],
+                                          scene.depths[scene.train_idx])]).reshape(-1, 3)
+  inside = np.all((pts >= lo - 1e-4) & (pts <= hi + 1e-4), -1)
+  assert inside.mean() > 0.99
+  g = gtrain.init_gaussians(CFG, scene, jax.random.PRNGKey(0))
+  m = np.asarray(g.means)[np.asarray(g.active)]
+  assert len(m) == CFG.gs_init_points and g.means.shape == (CFG.gs_capacity, 3)
+  assert np.all((m >= lo - 1e-5) & (m <= hi + 1e-5))
+
+
+# ----------------------------------------------------------------------------- ply
+
+
+def test_ply_round_trip(tmp_path):
+  g = _gaussians(7, 10, seed=4)
+  path = str(tmp_path / 'sub' / 'point_cloud.ply')
+  assert ply.write_ply(path, g) == 7
+  assert [p for p in os.listdir(tmp_path / 'sub')] == ['point_cloud.ply']
+  with open(path, 'rb') as f:
+    data = f.read()
+  names = ([f'f_rest_{i}' for i in range(45)])
+  want = ('ply\nformat binary_little_endian 1.0\nelement vertex 7\n' +
+          ''.join(f'property float {p}\n' for p in
+                  ['x', 'y', 'z', 'nx', 'ny', 'nz', 'f_dc_0', 'f_dc_1', 'f_dc_2'] + names +
+                  ['opacity', 'scale_0', 'scale_1', 'scale_2', 'rot_0', 'rot_1', 'rot_2',
+                   'rot_3']) + 'end_header\n').encode()
+  assert data.startswith(want) and len(data) == len(want) + 7 * 62 * 4
+  rows = np.frombuffer(data[len(want):], '<f4').reshape(7, 62)
+  # Channel-major f_rest: f_rest_0..14 are red's coefficients 1..15, then green's.
+  np.testing.assert_array_equal(rows[:, 9:24], np.asarray(g.sh)[:7, 1:, 0])
+  np.testing.assert_array_equal(rows[:, 24:39], np.asarray(g.sh)[:7, 1:, 1])
+  np.testing.assert_array_equal(rows[:, 3:6], 0.)
+  back = ply.read_ply(path, capacity=10)
+  for k in ('means', 'log_scales', 'quats', 'opacity_logits', 'sh'):
+    np.testing.assert_array_equal(getattr(back, k)[:7], np.asarray(getattr(g, k))[:7])
+    assert np.all(getattr(back, k)[7:] == 0.)
+  np.testing.assert_array_equal(back.active, np.asarray(g.active))
+  with pytest.raises(ValueError):
+    ply.read_ply(path, capacity=5)
+
+
+def test_renerf_rounds_run_on_gaussians_and_resume(scene, tmp_path):
+  """Config.backbone = 'gaussians' through the round driver and its run directory: B's
+  renders become the pseudo-views, D draws them only before K, finished rounds load."""
+  from flax import serialization  # pylint: disable=g-import-not-at-top
+  from renerf_jax import backbones, resume  # pylint: disable=g-import-not-at-top
+  cfg = dataclasses.replace(CFG, backbone='gaussians', num_rounds=1, interp_factors='0.5',
+                            lpips_nets=())  # LPIPS-alex needs 31 px a side.
+  run_dir = str(tmp_path / 'run')
+  state = resume.run_rounds(cfg, scene, run_dir, show_progress=False)
+  assert [m['round'] for m in state.metrics] == [0, 1]
+  assert all(np.isfinite(m['psnr']) and m['nan_skips'] == 0 for m in state.metrics)
+  assert isinstance(state.params, params_lib.Gaussians)
+  backbone = backbones.get_backbone(cfg)
+  with open(os.path.join(run_dir, 'round_0', 'params.msgpack'), 'rb') as f:
+    b_params = serialization.from_bytes(backbone.init_params(cfg), f.read())
+  assert state.pseudo.images.shape == (2, 24, 32, 3)  # 2 pairs x the factor 0.5
+  np.testing.assert_array_equal(state.pseudo.masks, 1.)  # No masks on 3DGS.
+  want = np.clip(backbone.render_views(cfg, scene, b_params, state.pseudo.poses)['rgb'],
+                 0., 1.)
+  np.testing.assert_allclose(state.pseudo.images, want, atol=1e-6)
+  log = rundir.read_jsonl(os.path.join(run_dir, 'round_1', 'train', 'log.jsonl'))
+  k = int(round(cfg.pseudo_until_frac * cfg.max_steps))
+  drawn = [r['step'] for r in log if r['pseudo_rays'] > 0]
+  assert drawn and max(drawn) <= k  # Pseudo-views only in D's first K steps.
+  assert log[-1]['pseudo_images'] == log[k - 1]['pseudo_images'] == len(drawn)
+  assert all(r['pseudo_rays'] == 0 for r in rundir.read_jsonl(
+      os.path.join(run_dir, 'round_0', 'train', 'log.jsonl')))
+  assert os.path.isfile(os.path.join(run_dir, 'round_1', 'eval', 'metrics.json'))
+  exported = ply.read_ply(os.path.join(run_dir, 'round_1', 'point_cloud.ply'))
+  active = np.asarray(state.params.active)
+  np.testing.assert_array_equal(exported.means, np.asarray(state.params.means)[active])
+  again = resume.run_rounds(cfg, scene, run_dir, show_progress=False)
+  jax.tree_util.tree_map(np.testing.assert_array_equal, again.params, state.params)
+  assert [m['psnr'] for m in again.metrics] == [m['psnr'] for m in state.metrics]
