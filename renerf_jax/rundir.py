@@ -4,6 +4,7 @@ import json
 import os
 import re
 
+import numpy as np
 from flax import serialization
 
 from renerf_jax import report
@@ -46,6 +47,45 @@ def restore_checkpoint(directory, template):
     return None
   with open(ckpts[-1][1], 'rb') as f:
     return serialization.from_bytes(template, f.read())
+
+
+def training_paths(out_dir):
+  """(checkpoint folder, log.jsonl path) of a training run's directory."""
+  return os.path.join(out_dir, 'checkpoints'), os.path.join(out_dir, 'log.jsonl')
+
+
+def resume_training(out_dir, state):
+  """Where a training run in out_dir stands: its last checkpoint, or a fresh start.
+
+  Args:
+    out_dir: the run's directory (None: training in memory, nothing is read).
+    state: the fresh train state (also the template of the checkpoint).
+
+  Returns:
+    (state, train_seconds, curve): restored from the last checkpoint with the log
+    truncated to its step, or `state`, 0 and an emptied log; curve = the log's records
+    with an 'eval_psnr'.
+  """
+  if out_dir is None:
+    return state, 0., []
+  ckpt_dir, log_path = training_paths(out_dir)
+  restored = restore_checkpoint(ckpt_dir, {'state': state, 'meta': {
+      'train_seconds': np.zeros((), np.float64)}})
+  train_seconds = 0.
+  if restored is None:
+    if os.path.exists(log_path):
+      os.remove(log_path)
+  else:
+    state, train_seconds = restored['state'], float(restored['meta']['train_seconds'])
+    truncate_jsonl(log_path, int(state.step))
+  return state, train_seconds, [r for r in read_jsonl(log_path) if 'eval_psnr' in r]
+
+
+def save_training(out_dir, state, train_seconds):
+  """An atomic checkpoint of a training run at state.step (None: nothing written)."""
+  if out_dir is not None:
+    save_checkpoint(training_paths(out_dir)[0], {'state': state, 'meta': {
+        'train_seconds': np.asarray(train_seconds, np.float64)}}, int(state.step))
 
 
 def append_jsonl(path, record):

@@ -6,7 +6,6 @@ pseudo-view pool once it is dropped, are not traced at all.
 """
 import dataclasses
 import functools
-import os
 import time
 from typing import Any
 
@@ -314,10 +313,6 @@ class TrainResult:
   curve: list  # [{'step', 'train_seconds', 'eval_psnr'}] cheap test evaluations.
 
 
-def _meta_template():
-  return {'train_seconds': np.zeros((), np.float64)}
-
-
 def pseudo_window(config):
   """[start, end) steps in which pseudo-view rays are sampled (Config.pseudo_schedule)."""
   k = min(pseudo_steps(config), config.max_steps)
@@ -352,29 +347,13 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
   has_pseudo = ('pseudo' in pools or 'mixed' in pools) and window[1] > window[0]
   base_key = jax.random.PRNGKey(config.seed)
   k_init, base_key = jax.random.split(base_key)
-  template = {'state': init_state(config, k_init, init_params), 'meta': _meta_template()}
-  state, train_seconds, curve = template['state'], 0., []
-  if out_dir is not None:
-    ckpt_dir = os.path.join(out_dir, 'checkpoints')
-    log_path = os.path.join(out_dir, 'log.jsonl')
-    restored = rundir.restore_checkpoint(ckpt_dir, template)
-    if restored is None:
-      if os.path.exists(log_path):
-        os.remove(log_path)
-    else:
-      state, train_seconds = restored['state'], float(restored['meta']['train_seconds'])
-      rundir.truncate_jsonl(log_path, int(state.step))
-    curve = [r for r in rundir.read_jsonl(log_path) if 'eval_psnr' in r]
+  state, train_seconds, curve = rundir.resume_training(
+      out_dir, init_state(config, k_init, init_params))
   state = jax.device_put(state, replicated_sharding())
   start = int(state.step)
   bar = progress_bar(total=config.max_steps, initial=start, desc=desc,
                      disable=not show_progress)
   t_last = time.perf_counter()
-
-  def save(state, secs):
-    if out_dir is not None:
-      rundir.save_checkpoint(ckpt_dir, {'state': state, 'meta': {
-          'train_seconds': np.asarray(secs, np.float64)}}, int(state.step))
 
   for step in range(start, config.max_steps):
     pseudo_on = has_pseudo and window[0] <= step < window[1]
@@ -403,9 +382,9 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
       bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}",
                       **({'test': f"{rec['eval_psnr']:.2f}"} if eval_now else {}))
       if out_dir is not None:
-        rundir.append_jsonl(log_path, rec)
+        rundir.append_jsonl(rundir.training_paths(out_dir)[1], rec)
       if ckpt_now:
-        save(state, train_seconds)
+        rundir.save_training(out_dir, state, train_seconds)
       t_last = time.perf_counter()
   bar.close()
   return TrainResult(state=state, train_seconds=train_seconds, curve=curve)

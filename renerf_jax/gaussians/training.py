@@ -16,7 +16,6 @@ and stay 0 under Adam, as in the reference), so raising it does not recompile.
 """
 import dataclasses
 import functools
-import os
 import time
 from typing import Any
 
@@ -425,10 +424,6 @@ def training_data(scene, pseudo=None):
 # ------------------------------------------------------------------------- the loop
 
 
-def _meta_template():
-  return {'train_seconds': np.zeros((), np.float64)}
-
-
 def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=None,
                     eval_fn=None, time_offset: float = 0., desc: str = 'train',
                     show_progress: bool = True) -> TrainResult:
@@ -456,19 +451,8 @@ def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=N
   base_key = jax.random.PRNGKey(config.seed)
   k_init, base_key = jax.random.split(base_key)
   params = init_gaussians(config, scene, k_init) if init_params is None else init_params
-  template = {'state': init_state(config, params, extent), 'meta': _meta_template()}
-  state, train_seconds, curve = template['state'], 0., []
-  if out_dir is not None:
-    ckpt_dir = os.path.join(out_dir, 'checkpoints')
-    log_path = os.path.join(out_dir, 'log.jsonl')
-    restored = rundir.restore_checkpoint(ckpt_dir, template)
-    if restored is None:
-      if os.path.exists(log_path):
-        os.remove(log_path)
-    else:
-      state, train_seconds = restored['state'], float(restored['meta']['train_seconds'])
-      rundir.truncate_jsonl(log_path, int(state.step))
-    curve = [r for r in rundir.read_jsonl(log_path) if 'eval_psnr' in r]
+  state, train_seconds, curve = rundir.resume_training(
+      out_dir, init_state(config, params, extent))
   # Own copies: the jitted steps donate the state, never the caller's init_params.
   state = strong_types(state)
   data = {False: training_data(scene)}
@@ -479,11 +463,6 @@ def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=N
   bar = progress_bar(total=config.max_steps, initial=start, desc=desc,
                      disable=not show_progress)
   t_last = time.perf_counter()
-
-  def save(state, secs):
-    if out_dir is not None:
-      rundir.save_checkpoint(ckpt_dir, {'state': state, 'meta': {
-          'train_seconds': np.asarray(secs, np.float64)}}, int(state.step))
 
   for step in range(start, config.max_steps):
     pseudo_on = has_pseudo and window[0] <= step < window[1]
@@ -521,9 +500,9 @@ def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=N
                       n=rec['num_gaussians'],
                       **({'test': f"{rec['eval_psnr']:.2f}"} if eval_now else {}))
       if out_dir is not None:
-        rundir.append_jsonl(log_path, rec)
+        rundir.append_jsonl(rundir.training_paths(out_dir)[1], rec)
       if ckpt_now:
-        save(state, train_seconds)
+        rundir.save_training(out_dir, state, train_seconds)
       t_last = time.perf_counter()
   bar.close()
   return TrainResult(state=state, train_seconds=train_seconds, curve=curve)
