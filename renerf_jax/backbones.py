@@ -1,6 +1,6 @@
 """What the round driver needs of a model family (`Config.backbone`).
 
-Re-Nerfing is an add-on to any novel-view-synthesis backbone. A round needs four things
+Re-Nerfing is an add-on to any novel-view-synthesis backbone. A round needs five things
 of one, each a function of the Config and the Scene, none of which writes a file unless
 given a directory:
 
@@ -13,10 +13,10 @@ given a directory:
 
 and, for anything that looks at a model, `render_views(config, scene, params, poses)`:
 RGB, depth and accumulated opacity at cameras; optionally `export(params, round_dir)`,
-extra files of a finished round (the Gaussians' .ply). `Config.backbone` picks one: 'nerf' (the
-RegNeRF-style mip-NeRF, with the MLP or grid field of `Config.field`) or 'gaussians'
-(3D Gaussian Splatting, renerf_jax/gaussians: whole images a step, no uncertainty
-masks unless Config.mask_signal = 'one_minus_acc').
+extra files of a finished round (the Gaussians' .ply). `Config.backbone` picks one:
+'nerf' (the RegNeRF-style mip-NeRF, with the MLP or grid field of `Config.field`) or
+'gaussians' (3D Gaussian Splatting, renerf_jax/gaussians: whole images a step, no
+uncertainty masks unless Config.mask_signal = 'one_minus_acc').
 """
 import dataclasses
 import os

@@ -204,3 +204,30 @@ def test_backbone_is_validated_and_the_nerf_renders_rgb_depth_acc():
   first = np.clip(out['rgb'][0], 0., 1.)
   psnr = -10. * np.log10(np.mean((first - scene.images[scene.test_idx[0]])**2))
   np.testing.assert_allclose(ev['per_image'][0]['psnr'], psnr, rtol=1e-4)
+
+
+def test_synthesis_by_rendering_masks_with_one_minus_acc_only():
+  """Pseudo-views of a non-NeRF backbone: its renders, unmasked, or masked where the
+  render is least opaque; the Laplace signal (a NeRF's field) is refused in one line."""
+  from renerf_jax import backbones  # pylint: disable=g-import-not-at-top
+  config = tiny_config(use_masks=True, mask_signal='one_minus_acc', mask_keep_frac=0.75)
+  scene = load_scene(config)
+  h, w = scene.height, scene.width
+
+  def render_views(config, scene, params, poses, show_progress=False):
+    del config, scene, params, show_progress
+    acc = np.broadcast_to(np.linspace(0., 1., h * w, dtype=np.float32).reshape(h, w),
+                          (len(poses), h, w))
+    return {'rgb': np.full((len(poses), h, w, 3), 1.5, np.float32), 'acc': acc,
+            'depth': np.ones((len(poses), h, w), np.float32)}
+
+  pv, timing, meta = backbones.synthesize_by_rendering(render_views, config, scene, None)
+  assert pv.images.shape == (12, h, w, 3) and len(meta) == 12
+  np.testing.assert_array_equal(pv.images, 1.)  # Clipped to [0, 1].
+  assert abs(float(np.mean(pv.masks)) - 0.75) < 2. / (h * w)
+  assert np.all(pv.masks[:, -1, -1] == 1.) and np.all(pv.masks[:, 0, 0] == 0.)  # Opaque kept.
+  np.testing.assert_allclose(pv.uncertainty, 1. - render_views(None, None, None, meta)['acc'])
+  plain, _, _ = backbones.synthesize_by_rendering(render_views, tiny_config(), scene, None)
+  np.testing.assert_array_equal(plain.masks, 1.)
+  with pytest.raises(ConfigError, match='one_minus_acc'):
+    backbones.synthesize_by_rendering(render_views, tiny_config(use_masks=True), scene, None)
