@@ -23,6 +23,7 @@ import numpy as np
 
 from renerf_jax import random_poses, report, training
 from renerf_jax.datasets import camera_rays, ray_pool
+from renerf_jax.errors import ConfigError
 from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses, render_pseudo_views
 
 
@@ -198,6 +199,11 @@ def check_rounds_config(config, scene):
   """
   if config.num_rounds > 0:
     pseudo_view_poses(config, scene)
+    if (config.backbone != 'nerf' and config.use_masks
+        and config.mask_signal != 'one_minus_acc'):
+      raise ConfigError(f'Config.mask_signal={config.mask_signal!r} needs the NeRF '
+                        f'backbone; Config.backbone={config.backbone!r} masks with '
+                        "'one_minus_acc' only")
 
 
 def run_rounds(config, scene, show_progress: bool = False) -> RoundState:

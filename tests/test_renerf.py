@@ -231,3 +231,13 @@ def test_synthesis_by_rendering_masks_with_one_minus_acc_only():
   np.testing.assert_array_equal(plain.masks, 1.)
   with pytest.raises(ConfigError, match='one_minus_acc'):
     backbones.synthesize_by_rendering(render_views, tiny_config(use_masks=True), scene, None)
+
+
+def test_gaussian_configs_load_with_rounds_and_refuse_the_laplace_masks_up_front():
+  from renerf_jax.configs import load_config  # pylint: disable=g-import-not-at-top
+  for name in ('gaussians_llff3.gin', 'gaussians_llff3_cpu.gin'):
+    config = load_config([name], ['Config.num_rounds = 1'])
+    assert config.backbone == 'gaussians' and not config.anneal_nearfar
+  config = tiny_config(backbone='gaussians', num_rounds=1, use_masks=True)
+  with pytest.raises(ConfigError, match='one_minus_acc'):
+    renerf.check_rounds_config(config, load_scene(config))  # Before B trains.

@@ -147,7 +147,7 @@ def densify_and_prune(gaussians, stats, key, grad_threshold, percent_dense, exte
   # Prune over the densified set; children have not been seen yet (max radius 0).
   opacity = jax.nn.sigmoid(new.opacity_logits)
   prune = opacity < min_opacity
-  radii = jnp.where(born, 0., stats.max_radii)
+  radii = jnp.where(born | split, 0., stats.max_radii)  # Both halves of a split are new.
   big = ((radii > MAX_SCREEN_RADIUS) |
          (jnp.max(jnp.exp(new.log_scales), -1) > MAX_WORLD_SCALE_FRAC * extent))
   prune = new.active & (prune | (big & prune_big))
