@@ -51,7 +51,11 @@ METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 
 
 def seconds_per_step(config, scene, steps):
-  """Median wall seconds of a train step after compilation."""
+  """Median wall seconds of a NeRF train step after compilation."""
+  if config.backbone != 'nerf':
+    raise SystemExit(f'error: calibration times NeRF steps; Config.backbone='
+                     f'{config.backbone!r} needs --sec_per_step (e.g. from '
+                     'benchmarks/bench_gaussians.py)')
   pools = make_pools(config, scene, None)
   cam = training.Camera.of(scene)
   state = training.init_state(config, jax.random.PRNGKey(0))

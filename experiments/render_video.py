@@ -17,7 +17,6 @@ import os
 import sys
 
 import imageio.v3 as iio
-import jax
 import numpy as np
 from flax import serialization
 
@@ -25,19 +24,18 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # pylint: disable=g-import-not-at-top
 from experiments.tables import bindings_of
 from renerf_jax import poses as pose_lib
-from renerf_jax import renerf, report, resume, rundir, training
+from renerf_jax import renerf, report, resume, rundir
+from renerf_jax.backbones import get_backbone
 from renerf_jax.configs import load_config
-from renerf_jax.datasets import camera_rays, load_scene
+from renerf_jax.datasets import load_scene
 from renerf_jax.progress import progress_bar
-from renerf_jax.rendering import render_image
 
 
 def load_params(config, run_dir, r):
   rdir = resume.round_dir(run_dir, r)
   if not rundir.is_done(rdir):
     raise SystemExit(f'error: {rdir} is not a finished round')
-  template = training.init_state(renerf.round_config(config, r),
-                                 jax.random.PRNGKey(0)).params
+  template = get_backbone(config).init_params(renerf.round_config(config, r))
   with open(os.path.join(rdir, 'params.msgpack'), 'rb') as f:
     return serialization.from_bytes(template, f.read())
 
@@ -92,12 +90,12 @@ def main():
   scene = load_scene(config)
   small = downscaled(scene, args.downscale)
   path = pose_lib.camera_path(scene.poses, args.frames).astype(np.float32)
-  all_rays = camera_rays(small, None, path)  # [frames, h, w]: one compilation
+  render_views = get_backbone(config).render_views
   frames = []
   bar = progress_bar(total=len(path), desc='video', unit='frame')
   for i in range(len(path)):
-    rays = jax.tree_util.tree_map(lambda x, i=i: x[i], all_rays)
-    imgs = [render_image(config, prm, rays)['rgb'] for prm in params]
+    imgs = [np.clip(render_views(config, small, prm, path[i:i + 1])['rgb'][0], 0., 1.)
+            for prm in params]
     gap = np.ones((small.height, 4, 3), np.float32)
     frames.append(report.to_uint8(np.concatenate([imgs[0], gap, imgs[1]], 1)))
     bar.update(1)

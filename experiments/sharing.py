@@ -25,6 +25,7 @@ import jax
 import numpy as np
 
 from renerf_jax import laplace, renerf, report, rundir
+from renerf_jax.backbones import get_backbone
 from renerf_jax.configs import config_differences, fields_where
 from renerf_jax.resume import round_dir
 
@@ -145,7 +146,10 @@ HESSIAN_CACHE = HessianCache()
 
 
 def memo_synthesize(config, scene, params, show_progress=False):
-  """renerf.synthesize with the process's Hessian and view memos."""
+  """renerf.synthesize with the process's Hessian and view memos (NeRF backbones; any
+  other backbone synthesises through its own Backbone.synthesize, unmemoised)."""
+  if config.backbone != 'nerf':
+    return get_backbone(config).synthesize(config, scene, params, show_progress)
   return renerf.synthesize(config, scene, params, show_progress, sigma_fn=HESSIAN_CACHE,
                            view_cache=VIEW_CACHE)
 

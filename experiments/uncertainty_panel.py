@@ -36,6 +36,9 @@ def main(argv=None):
   p.add_argument('--out', required=True, help='output prefix (.png, .json)')
   args = p.parse_args(argv)
   config = dataclasses.replace(run_config(args), use_masks=True, mask_signal='laplace')
+  if config.backbone != 'nerf':
+    raise SystemExit(f'error: the Laplace uncertainty needs the NeRF backbone; --config '
+                     f'gives Config.backbone={config.backbone!r}')
   if os.path.abspath(args.work_dir).startswith(os.path.abspath(args.run_dir) + os.sep):
     raise SystemExit(f'error: --work_dir {args.work_dir} lies inside --run_dir; '
                      'a finished run is never written to')

@@ -21,20 +21,79 @@ class Rays:
   far: jnp.ndarray  # [..., 1]
 
 
-def pixel_directions(pix_x, pix_y, focal, h, w):
+def distort(x, y, dist):
+  """OpenCV's radial-tangential distortion of normalised image coordinates.
+
+  Args:
+    x, y: [...] undistorted normalised coordinates (x right, y down, z = 1).
+    dist: (k1, k2, p1, p2).
+
+  Returns:
+    (xd, yd): the distorted coordinates.
+  """
+  k1, k2, p1, p2 = dist
+  r2 = x * x + y * y
+  radial = 1. + r2 * (k1 + k2 * r2)
+  return (x * radial + 2. * p1 * x * y + p2 * (r2 + 2. * x * x),
+          y * radial + p1 * (r2 + 2. * y * y) + 2. * p2 * x * y)
+
+
+def undistort(xd, yd, dist, iterations=10):
+  """Inverts `distort` by Newton's method started at the distorted point (as COLMAP and
+  nerfstudio do); exact for dist = 0, to float precision after a few iterations for the
+  distortions of real lenses.
+
+  Args:
+    xd, yd: [...] distorted normalised coordinates. dist: (k1, k2, p1, p2).
+    iterations: Newton steps (static).
+
+  Returns:
+    (x, y) with distort(x, y, dist) = (xd, yd).
+  """
+  k1, k2, p1, p2 = dist
+  x, y = xd, yd
+  for _ in range(iterations):
+    fx, fy = distort(x, y, dist)
+    fx, fy = fx - xd, fy - yd
+    r2 = x * x + y * y
+    radial = 1. + r2 * (k1 + k2 * r2)
+    d_radial = k1 + 2. * k2 * r2  # d radial / d r2
+    j_xx = radial + 2. * x * x * d_radial + 2. * p1 * y + 6. * p2 * x
+    j_xy = 2. * x * y * d_radial + 2. * p1 * x + 2. * p2 * y
+    j_yx = 2. * x * y * d_radial + 2. * p1 * x + 2. * p2 * y
+    j_yy = radial + 2. * y * y * d_radial + 6. * p1 * y + 2. * p2 * x
+    det = j_xx * j_yy - j_xy * j_yx
+    det = jnp.where(jnp.abs(det) > 1e-12, det, 1e-12)
+    x = x - (j_yy * fx - j_xy * fy) / det
+    y = y - (j_xx * fy - j_yx * fx) / det
+  return x, y
+
+
+def pixel_directions(pix_x, pix_y, focal, h, w, intrinsics=None):
   """Camera-space ray directions through pixel centres.
 
   Args:
     pix_x, pix_y: [...] pixel column and row indices (float or int).
     focal: focal length in pixels.
     h, w: image height and width (principal point at the image centre).
+    intrinsics: None (the pinhole above), or (fx, fy, cx, cy, k1, k2, p1, p2): focal
+      lengths and principal point in pixels (pixel i spans [i, i + 1]) and OpenCV
+      distortion, undone on the normalised coordinates (static tuple).
 
   Returns:
     [..., 3] directions with z = -1.
   """
-  x = (pix_x + 0.5 - 0.5 * w) / focal
-  y = -(pix_y + 0.5 - 0.5 * h) / focal
-  return jnp.stack([x, y, -jnp.ones_like(x)], axis=-1)
+  if intrinsics is None:
+    x = (pix_x + 0.5 - 0.5 * w) / focal
+    y = -(pix_y + 0.5 - 0.5 * h) / focal
+    return jnp.stack([x, y, -jnp.ones_like(x)], axis=-1)
+  fx, fy, cx, cy = intrinsics[:4]
+  x = (pix_x + 0.5 - cx) / fx
+  y = (pix_y + 0.5 - cy) / fy  # OpenCV axes: y down.
+  dist = tuple(intrinsics[4:8])
+  if any(d != 0. for d in dist):
+    x, y = undistort(x, y, dist)
+  return jnp.stack([x, -y, -jnp.ones_like(x)], axis=-1)
 
 
 def convert_to_ndc(origins, directions, focal, h, w, near=1.):
@@ -68,15 +127,15 @@ def convert_to_ndc(origins, directions, focal, h, w, near=1.):
   return o_ndc, d_ndc
 
 
-def _world_rays(c2w, pix_x, pix_y, focal, h, w):
-  dirs_cam = pixel_directions(pix_x, pix_y, focal, h, w)
+def _world_rays(c2w, pix_x, pix_y, focal, h, w, intrinsics=None):
+  dirs_cam = pixel_directions(pix_x, pix_y, focal, h, w, intrinsics)
   rot = c2w[..., :3, :3]
   directions = jnp.einsum('...ij,...j->...i', rot, dirs_cam)
   origins = jnp.broadcast_to(c2w[..., :3, 3], directions.shape)
   return origins, directions
 
 
-def pixel_rays(c2w, pix_x, pix_y, focal, h, w, use_ndc, near, far):
+def pixel_rays(c2w, pix_x, pix_y, focal, h, w, use_ndc, near, far, intrinsics=None):
   """Rays through arbitrary pixels of pinhole cameras, with mip-NeRF cone radii.
 
   The radius is the distance to the ray of the pixel one row below, times 2 / sqrt(12)
@@ -87,14 +146,18 @@ def pixel_rays(c2w, pix_x, pix_y, focal, h, w, use_ndc, near, far):
     c2w: [..., 3, 4] camera-to-world matrices broadcasting against pix_x.
     pix_x, pix_y: [...] pixel coordinates.
     focal, h, w: pinhole intrinsics.
+    intrinsics: None, or a static (fx, fy, cx, cy, k1, k2, p1, p2) (pixel_directions;
+      not with use_ndc, whose mapping assumes the centred pinhole).
     use_ndc: static bool; convert to NDC (forward-facing scenes).
     near, far: scalar bounds stored per ray (NDC: 0 and 1).
 
   Returns:
     Rays with leading shape [...].
   """
-  origins, directions = _world_rays(c2w, pix_x, pix_y, focal, h, w)
-  _, directions_below = _world_rays(c2w, pix_x, pix_y + 1., focal, h, w)
+  if use_ndc and intrinsics is not None:
+    raise ValueError('NDC rays need the centred pinhole camera (intrinsics=None)')
+  origins, directions = _world_rays(c2w, pix_x, pix_y, focal, h, w, intrinsics)
+  _, directions_below = _world_rays(c2w, pix_x, pix_y + 1., focal, h, w, intrinsics)
   viewdirs = directions / jnp.linalg.norm(directions, axis=-1, keepdims=True)
   if use_ndc:
     origins, directions_ndc = convert_to_ndc(origins, directions, focal, h, w)
@@ -111,12 +174,12 @@ def pixel_rays(c2w, pix_x, pix_y, focal, h, w, use_ndc, near, far):
               near=ones * near, far=ones * far)
 
 
-def image_rays(c2w, h, w, focal, use_ndc, near, far):
-  """All rays of an h x w image of one camera, shaped [h, w]."""
+def image_rays(c2w, h, w, focal, use_ndc, near, far, intrinsics=None):
+  """All rays of an h x w image of one camera, shaped [h, w] (intrinsics: pixel_rays)."""
   pix_x, pix_y = jnp.meshgrid(jnp.arange(w, dtype=jnp.float32),
                               jnp.arange(h, dtype=jnp.float32), indexing='xy')
   return pixel_rays(jnp.asarray(c2w, jnp.float32)[None, None], pix_x, pix_y, focal, h, w,
-                    use_ndc, near, far)
+                    use_ndc, near, far, intrinsics)
 
 
 def normalize(x):

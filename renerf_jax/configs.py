@@ -52,7 +52,9 @@ def _f(default, category: str):
 class Config:
   """All knobs. Defaults are RegNeRF llff3 values unless a comment says otherwise."""
   # --- data ---
-  dataset_loader: str = 'llff'  # 'llff', 'blender' or 'procedural' (the embedded scene).
+  # 'llff', 'transforms' (Instant-NGP / nerfstudio transforms.json), 'blender' or
+  # 'procedural' (the embedded scene).
+  dataset_loader: str = 'llff'
   data_dir: str = ''  # Folder that holds the scene folders (e.g. .../nerf_llff_data).
   scene: str = 'fern'  # Scene folder name inside data_dir.
   factor: int = 8  # LLFF image downsampling factor (reads images_<factor>).
@@ -97,7 +99,11 @@ class Config:
   resample_padding: float = 0.01
   stop_level_grad: bool = True
   ray_shape: str = 'cylinder'  # 'cone' or 'cylinder'.
-  lindisp: bool = False
+  lindisp: bool = False  # Samples evenly spaced in disparity (unbounded scenes).
+  # Unbounded scenes: sample Gaussians contracted into radius 2 before the fields
+  # (contraction.py): '' (none), 'l2' (mip-NeRF 360's ball) or 'inf' (nerfacto's cube);
+  # set grid_box to ((-2, -2, -2), (2, 2, 2)) with it.
+  contraction: str = ''
   randomized: bool = True  # Stratified jitter while training.
   # --- model: field ---
   backbone: str = 'nerf'  # The model family Re-Nerfing runs on (backbones.py): 'nerf' or
@@ -143,7 +149,7 @@ class Config:
   gs_lr_scales: float = 5e-3  # Lr of the log scales.
   gs_lr_quats: float = 1e-3  # Lr of the rotations.
   gs_lambda_dssim: float = 0.2  # Loss (1 - l) L1 + l (1 - SSIM).
-  gs_background: Tuple[float, float, float] = (0., 0., 0.)  # Render background (black).
+  gs_background: Tuple[float, float, float] = (0., 0., 0.)  # Background (white_bkgd: white).
   # --- RegNeRF regularisers (0 / False switches a term off: nothing of it is traced) ---
   depth_tv_loss_mult: float = 0.1  # Depth-TV weight after the decay (0: off).
   depth_tv_decay: bool = True  # Log-linear decay from _start to _end over _maxstep.
@@ -254,8 +260,14 @@ class Config:
            'pairs')
     object.__setattr__(self, 'llff_min_near', tuple(
         (name, float(near)) for name, near in self.llff_min_near if name == self.scene))
-    _check(self.dataset_loader in ('llff', 'blender', 'procedural'),
-           f'Config.dataset_loader={self.dataset_loader!r} (llff, blender or procedural)')
+    _check(self.dataset_loader in ('llff', 'transforms', 'blender', 'procedural'),
+           f'Config.dataset_loader={self.dataset_loader!r} (llff, transforms, blender or '
+           'procedural)')
+    _check(self.contraction in ('', 'l2', 'inf'),
+           f"Config.contraction={self.contraction!r} ('', 'l2' or 'inf')")
+    _check(not (self.contraction and self.use_ndc),
+           f'Config.contraction={self.contraction!r} is for unbounded scenes, not NDC '
+           '(Config.use_ndc=True)')
     _check(self.ray_shape in ('cone', 'cylinder'),
            f'Config.ray_shape={self.ray_shape!r} (cone or cylinder)')
     _check(self.density_activation in ('softplus', 'exp'),

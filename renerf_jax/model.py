@@ -4,7 +4,7 @@ from typing import Callable, List, Optional
 import jax
 import jax.numpy as jnp
 
-from renerf_jax import mip
+from renerf_jax import contraction, mip
 from renerf_jax.fields import make_field
 from renerf_jax.fields.proposal import make_proposal
 
@@ -84,7 +84,8 @@ def render_rays(config, params, rays, key, train: bool,
     offsets: optional per-level hook (level, means [B, S, 3]) -> offsets [B, S, 3],
       added to that level's sample means before the field (means + offsets(level,
       means): the Bayes' Rays deformation field, deformation.make_warp, or per-sample
-      offsets per level); None costs nothing.
+      offsets per level; with Config.contraction, in contracted space as Bayes' Rays
+      does); None costs nothing.
 
   Returns:
     One dict per level: rgb [B, 3], distance [B], acc [B], weights [B, S], t_vals [B, S+1],
@@ -109,9 +110,14 @@ def render_rays(config, params, rays, key, train: bool,
           k_sample, rays.origins, rays.directions, rays.radii, t_vals, weights, randomized,
           config.ray_shape, config.stop_level_grad, config.resample_padding,
           config.num_samples)
+    density_only = proposal and level == 0  # Its covariances are never computed.
+    if config.contraction:  # Unbounded scenes: fields and offsets in contracted space.
+      means, contracted_covs = contraction.contract_samples(
+          means, None if density_only else covs, config.contraction)
+      covs = covs if density_only else contracted_covs
     if offsets is not None:
       means = means + offsets(level, means)
-    if proposal and level == 0:  # Density only: the covariances are never computed.
+    if density_only:
       raw_density = make_proposal(config).apply({'params': params['proposal']},
                                                 materialize(means))
       raw_rgb = None

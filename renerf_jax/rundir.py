@@ -3,6 +3,7 @@ import glob
 import json
 import os
 import re
+import time
 
 import numpy as np
 from flax import serialization
@@ -86,6 +87,55 @@ def save_training(out_dir, state, train_seconds):
   if out_dir is not None:
     save_checkpoint(training_paths(out_dir)[0], {'state': state, 'meta': {
         'train_seconds': np.asarray(train_seconds, np.float64)}}, int(state.step))
+
+
+class TrainingLog:
+  """The logging, evaluation and checkpoint edge of a training loop (both backbones).
+
+  Training time counts the steps only: evaluation and writing happen between two
+  clock reads. Each logged step appends one record to out_dir's log.jsonl (nothing is
+  written when out_dir is None); evaluated records also join `curve`.
+  """
+
+  def __init__(self, config, out_dir, eval_fn, train_seconds, curve, time_offset, bar):
+    self.config, self.out_dir, self.eval_fn = config, out_dir, eval_fn
+    self.train_seconds, self.curve, self.time_offset, self.bar = (train_seconds, curve,
+                                                                  time_offset, bar)
+    self.t_last = time.perf_counter()
+
+  def _eval_now(self, done):
+    c = self.config
+    return self.eval_fn is not None and c.eval_every > 0 and (
+        done % c.eval_every == 0 or done == c.max_steps)
+
+  def _ckpt_now(self, done):
+    return done % self.config.checkpoint_every == 0 or done == self.config.max_steps
+
+  def due(self, done):
+    """Whether step `done` (1-based) is logged, evaluated or checkpointed."""
+    return (done % self.config.print_every == 0 or done == self.config.max_steps
+            or self._eval_now(done) or self._ckpt_now(done))
+
+  def record(self, done, state, fields, postfix=None):
+    """Logs step `done`: fields (after step, train_seconds, time), the test PSNR where
+    due, a progress-bar postfix; checkpoints state where due. Returns the record."""
+    self.train_seconds += time.perf_counter() - self.t_last
+    rec = {'step': done, 'train_seconds': self.train_seconds,
+           'time': self.time_offset + self.train_seconds}
+    rec.update(fields)
+    eval_now = self._eval_now(done)
+    if eval_now:
+      rec['eval_psnr'] = float(self.eval_fn(state.params))
+      self.curve.append(rec)
+    self.bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}",
+                         **(postfix or {}),
+                         **({'test': f"{rec['eval_psnr']:.2f}"} if eval_now else {}))
+    if self.out_dir is not None:
+      append_jsonl(training_paths(self.out_dir)[1], rec)
+    if self._ckpt_now(done):
+      save_training(self.out_dir, state, self.train_seconds)
+    self.t_last = time.perf_counter()
+    return rec
 
 
 def append_jsonl(path, record):

@@ -6,7 +6,6 @@ pseudo-view pool once it is dropped, are not traced at all.
 """
 import dataclasses
 import functools
-import time
 from typing import Any
 
 import flax
@@ -353,7 +352,7 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
   start = int(state.step)
   bar = progress_bar(total=config.max_steps, initial=start, desc=desc,
                      disable=not show_progress)
-  t_last = time.perf_counter()
+  log = rundir.TrainingLog(config, out_dir, eval_fn, train_seconds, curve, time_offset, bar)
 
   for step in range(start, config.max_steps):
     pseudo_on = has_pseudo and window[0] <= step < window[1]
@@ -361,30 +360,15 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
                               jax.random.fold_in(base_key, step))
     done = step + 1
     bar.update(1)
-    log_now = done % config.print_every == 0 or done == config.max_steps
-    eval_now = eval_fn is not None and config.eval_every > 0 and (
-        done % config.eval_every == 0 or done == config.max_steps)
-    ckpt_now = done % config.checkpoint_every == 0 or done == config.max_steps
-    if log_now or eval_now or ckpt_now:
+    if log.due(done):
       stats = jax.device_get(stats)
-      now = time.perf_counter()
-      train_seconds += now - t_last
-      rec = {'step': done, 'train_seconds': train_seconds,
-             'time': time_offset + train_seconds, 'loss': float(stats['loss']),
-             'psnr': float(stats['psnr']), 'lr': float(stats['lr']),
-             'nan_skips': int(state.nan_skips), 'pseudo_rays': int(stats['pseudo_rays'])}
+      fields = {'loss': float(stats['loss']), 'psnr': float(stats['psnr']),
+                'lr': float(stats['lr']), 'nan_skips': int(state.nan_skips),
+                'pseudo_rays': int(stats['pseudo_rays'])}
       for k in ('depth_tv', 'depth_tv_weight', 'occ', 'interlevel', 'distortion'):
         if k in stats:
-          rec[k] = float(stats[k])
-      if eval_now:
-        rec['eval_psnr'] = float(eval_fn(state.params))
-        curve.append(rec)
-      bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}",
-                      **({'test': f"{rec['eval_psnr']:.2f}"} if eval_now else {}))
-      if out_dir is not None:
-        rundir.append_jsonl(rundir.training_paths(out_dir)[1], rec)
-      if ckpt_now:
-        rundir.save_training(out_dir, state, train_seconds)
-      t_last = time.perf_counter()
+          fields[k] = float(stats[k])
+      log.record(done, state, fields)
   bar.close()
+  train_seconds = log.train_seconds
   return TrainResult(state=state, train_seconds=train_seconds, curve=curve)

@@ -260,6 +260,19 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
                          capture_output=True, text=True, timeout=300, check=False)
     assert bad.returncode != 0 and message in bad.stderr, bad.stderr[-2000:]
     assert 'Traceback' not in bad.stderr
+  # experiments/test_renders.py: the photo | B | R1 | B 2x of the runs, from their PNGs.
+  renders = [sys.executable, 'experiments/test_renders.py', '--runs', str(out / 's'),
+             '--config', 'gin_configs/demo.gin', '--scenes', 'procedural',
+             "--gin_bindings=Config.dataset_loader='procedural'"] + [
+                 f'--gin_bindings={b}' for b in TINY]
+  sub = subprocess.run(renders + ['--seed', '1', '--out', str(out / 'renders.png')],
+                       cwd=REPO, capture_output=True, text=True, timeout=300, check=False)
+  assert sub.returncode == 0, sub.stderr[-3000:]
+  assert (out / 'renders.png').stat().st_size > 0 and tree_files(out / 's') == before
+  bad = subprocess.run(renders + ['--seed', '7', '--out', str(out / 'none.png')], cwd=REPO,
+                       capture_output=True, text=True, timeout=300, check=False)
+  assert bad.returncode == 1 and 'seed7/round_0/eval/test_' in bad.stderr
+  assert 'Traceback' not in bad.stderr and not (out / 'none.png').exists()
 
 
 def test_equal_time_comparison_takes_given_idle_rates_and_per_method_seeds(tmp_path):

@@ -316,6 +316,14 @@ def test_all_inactive_renders_the_background_with_zero_gradients():
                               _Scene(), g, np.asarray(_POSE)[None])
   np.testing.assert_allclose(views['rgb'][0], np.broadcast_to(bg, (24, 32, 3)))
   assert np.all(views['depth'] == 0.) and np.all(views['acc'] == 0.)
+  # Scenes composited on white (Blender) render on white, whatever gs_background says,
+  # in training's loss as in render_views.
+  white = dataclasses.replace(CFG, gs_background=(0.2, 0.5, 0.9), white_bkgd=True)
+  views = gtrain.render_views(white, _Scene(), g, np.asarray(_POSE)[None])
+  np.testing.assert_array_equal(views['rgb'][0], np.ones((24, 32, 3), np.float32))
+  _, _, out, _, _ = _loss_and_grads(white, _CAM, g, img, _POSE,
+                                    jnp.ones((24, 32), jnp.float32), 3)
+  np.testing.assert_array_equal(out['rgb'], np.ones((24, 32, 3), np.float32))
 
 
 class _Scene:

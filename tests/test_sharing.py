@@ -206,3 +206,19 @@ def test_hessian_pass_is_shared_only_when_nothing_it_depends_on_differs(monkeypa
   assert len(calls) == 3
   # Bounded: the oldest entries go.
   assert len(cache.cache) == sharing.HESSIAN_CACHE_SIZE
+
+
+def test_table_synthesis_of_a_gaussians_baseline_is_its_backbone_renders():
+  """The tables' memoised synthesis serves the NeRF only; Gaussians get their own
+  Backbone.synthesize (their renders at the pseudo-view poses), not a NeRF render."""
+  from renerf_jax import backbones  # pylint: disable=g-import-not-at-top
+  from renerf_jax.gaussians import training as gtrain  # pylint: disable=g-import-not-at-top
+  cfg = tiny_config(backbone='gaussians', procedural_size=(24, 32), gs_capacity=64,
+                    gs_init_points=32, gs_tile_cap=64, interp_factors='0.5', lpips_nets=())
+  scene = load_scene(cfg)
+  params = gtrain.init_gaussians(cfg, scene, jax.random.PRNGKey(0))
+  pv, timing, _ = sharing.memo_synthesize(cfg, scene, params)
+  want, _, _ = backbones.get_backbone(cfg).synthesize(cfg, scene, params)
+  assert pv.images.shape == (2, 24, 32, 3) and timing['seconds'] > 0.
+  np.testing.assert_array_equal(pv.images, want.images)
+  np.testing.assert_array_equal(pv.poses, want.poses)

@@ -1,4 +1,5 @@
-"""Datasets: LLFF, Blender and the embedded procedural scene, behind one `load_scene`."""
+"""Datasets: LLFF, transforms.json (Instant-NGP / nerfstudio), Blender and the embedded
+procedural scene, behind one `load_scene`."""
 from renerf_jax.datasets.scene import (Scene, camera_rays, downsample_scene, fewshot_split,
                                        ray_pool)
 
@@ -11,6 +12,9 @@ def load_scene(config) -> Scene:
   if config.dataset_loader == 'llff':
     from renerf_jax.datasets.llff import load_llff  # pylint: disable=g-import-not-at-top
     scene = load_llff(config)
+  elif config.dataset_loader == 'transforms':
+    from renerf_jax.datasets.transforms import load_transforms  # pylint: disable=g-import-not-at-top
+    scene = load_transforms(config)
   elif config.dataset_loader == 'blender':
     from renerf_jax.datasets.blender import load_blender  # pylint: disable=g-import-not-at-top
     scene = load_blender(config)

@@ -30,6 +30,9 @@ class Scene:
   # World-space box ((lo x, y, z), (hi x, y, z)) holding the scene content (where a
   # Gaussian scene is initialised; bbox is the NDC cube for LLFF); None: unknown.
   world_bounds: Optional[tuple] = None
+  # Camera intrinsics shared by every view when not the centred pinhole of `focal`:
+  # (fx, fy, cx, cy, k1, k2, p1, p2), pixels and OpenCV distortion (transforms.json).
+  intrinsics: Optional[tuple] = None
 
   @property
   def height(self) -> int:
@@ -63,8 +66,12 @@ def downsample_scene(scene: Scene, k: int) -> Scene:
   def box(a):
     a = a[:, y0:y0 + h * k, x0:x0 + w * k]
     return a.reshape(a.shape[0], h, k, w, k, *a.shape[3:]).mean(axis=(2, 4)).astype(a.dtype)
+  intrinsics = scene.intrinsics
+  if intrinsics is not None:  # Pixel i spans source [x0 + i k, x0 + (i + 1) k].
+    fx, fy, cx, cy = intrinsics[:4]
+    intrinsics = (fx / k, fy / k, (cx - x0) / k, (cy - y0) / k) + tuple(intrinsics[4:])
   return dataclasses.replace(
-      scene, images=box(scene.images), focal=scene.focal / k,
+      scene, images=box(scene.images), focal=scene.focal / k, intrinsics=intrinsics,
       depths=None if scene.depths is None else box(scene.depths))
 
 
@@ -135,7 +142,8 @@ def camera_rays(scene: Scene, idx, poses=None) -> cameras.Rays:
   """Rays of full images: [len(idx), H, W] for the scene's cameras (or given poses)."""
   poses = scene.poses[np.asarray(idx)] if poses is None else poses
   fn = jax.jit(jax.vmap(lambda c2w: cameras.image_rays(
-      c2w, scene.height, scene.width, scene.focal, scene.use_ndc, scene.near, scene.far)))
+      c2w, scene.height, scene.width, scene.focal, scene.use_ndc, scene.near, scene.far,
+      scene.intrinsics)))
   return fn(jnp.asarray(poses, jnp.float32))
 
 

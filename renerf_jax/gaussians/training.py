@@ -16,7 +16,6 @@ and stay 0 under Adam, as in the reference), so raising it does not recompile.
 """
 import dataclasses
 import functools
-import time
 from typing import Any
 
 import flax
@@ -26,6 +25,7 @@ import numpy as np
 import optax
 
 from renerf_jax import metrics, regularizers, rundir
+from renerf_jax.errors import DataError
 from renerf_jax.gaussians import density
 from renerf_jax.gaussians import params as params_lib
 from renerf_jax.gaussians import render as render_lib
@@ -60,6 +60,11 @@ class Camera:
 
   @classmethod
   def of(cls, scene):
+    """The scene's camera; DataError for cameras other than the centred pinhole."""
+    if getattr(scene, 'intrinsics', None) is not None:
+      raise DataError(f'scene {scene.name!r}: the Gaussians render centred pinhole '
+                      f'cameras; its cameras have intrinsics (fx, fy, cx, cy, k1, k2, '
+                      f'p1, p2) = {tuple(round(float(v), 4) for v in scene.intrinsics)}')
     return cls(scene.height, scene.width, float(scene.focal))
 
 
@@ -291,12 +296,19 @@ def sh_mask(degree):
   return (jnp.arange(params_lib.NUM_SH) < (degree + 1)**2).astype(jnp.float32)[:, None]
 
 
+def background(config):
+  """[3] render background: white where the images are composited on white
+  (Config.white_bkgd, Blender), else Config.gs_background."""
+  if config.white_bkgd:
+    return jnp.ones(3, jnp.float32)
+  return jnp.asarray(config.gs_background, jnp.float32)
+
+
 def render_for_loss(config, cam, params, fields, offset, pose, degree):
   """Render of the Gaussians `fields` (active as params) at pose with SH degree `degree`."""
   g = from_fields(fields, params.active)
   g = g.replace(sh=g.sh * sh_mask(degree))
-  return render_lib.render(g, pose, cam.focal, cam.h, cam.w, 3,
-                           jnp.asarray(config.gs_background, jnp.float32),
+  return render_lib.render(g, pose, cam.focal, cam.h, cam.w, 3, background(config),
                            config.gs_tile_cap, NEAR, TILE, means2d_offset=offset)
 
 
@@ -462,7 +474,7 @@ def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=N
   start = int(state.step)
   bar = progress_bar(total=config.max_steps, initial=start, desc=desc,
                      disable=not show_progress)
-  t_last = time.perf_counter()
+  log = rundir.TrainingLog(config, out_dir, eval_fn, train_seconds, curve, time_offset, bar)
 
   for step in range(start, config.max_steps):
     pseudo_on = has_pseudo and window[0] <= step < window[1]
@@ -477,34 +489,18 @@ def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=N
       if done % reset_every == 0:
         state = opacity_reset_state(state)
     bar.update(1)
-    log_now = done % config.print_every == 0 or done == config.max_steps
-    eval_now = eval_fn is not None and config.eval_every > 0 and (
-        done % config.eval_every == 0 or done == config.max_steps)
-    ckpt_now = done % config.checkpoint_every == 0 or done == config.max_steps
-    if log_now or eval_now or ckpt_now:
+    if log.due(done):
       stats = jax.device_get(stats)
-      now = time.perf_counter()
-      train_seconds += now - t_last
-      rec = {'step': done, 'train_seconds': train_seconds,
-             'time': time_offset + train_seconds, 'loss': float(stats['loss']),
-             'psnr': float(stats['psnr']), 'lr': float(stats['lr']),
-             'nan_skips': int(state.nan_skips), 'pseudo_rays': int(stats['pseudo_rays']),
-             'pseudo_images': int(state.pseudo_images),
-             'num_gaussians': int(jnp.sum(state.params.active)),
-             'cap_bound': float(stats['cap_bound']), 'dropped': int(state.dropped),
-             'sh_degree': int(stats['sh_degree'])}
-      if eval_now:
-        rec['eval_psnr'] = float(eval_fn(state.params))
-        curve.append(rec)
-      bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}",
-                      n=rec['num_gaussians'],
-                      **({'test': f"{rec['eval_psnr']:.2f}"} if eval_now else {}))
-      if out_dir is not None:
-        rundir.append_jsonl(rundir.training_paths(out_dir)[1], rec)
-      if ckpt_now:
-        rundir.save_training(out_dir, state, train_seconds)
-      t_last = time.perf_counter()
+      n = int(jnp.sum(state.params.active))
+      log.record(done, state, {
+          'loss': float(stats['loss']), 'psnr': float(stats['psnr']),
+          'lr': float(stats['lr']), 'nan_skips': int(state.nan_skips),
+          'pseudo_rays': int(stats['pseudo_rays']),
+          'pseudo_images': int(state.pseudo_images), 'num_gaussians': n,
+          'cap_bound': float(stats['cap_bound']), 'dropped': int(state.dropped),
+          'sh_degree': int(stats['sh_degree'])}, postfix={'n': n})
   bar.close()
+  train_seconds = log.train_seconds
   return TrainResult(state=state, train_seconds=train_seconds, curve=curve)
 
 
@@ -513,8 +509,7 @@ def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=N
 
 @functools.partial(jax.jit, static_argnums=(0, 1))
 def _render_one(config, cam, params, pose):
-  out = render_lib.render(params, pose, cam.focal, cam.h, cam.w, 3,
-                          jnp.asarray(config.gs_background, jnp.float32),
+  out = render_lib.render(params, pose, cam.focal, cam.h, cam.w, 3, background(config),
                           config.gs_tile_cap, NEAR, TILE)
   acc = out['acc']
   depth = jnp.where(acc > 0., out['depth'] / jnp.where(acc > 0., acc, 1.), 0.)

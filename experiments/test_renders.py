@@ -1,0 +1,83 @@
+"""Test renders of a renerf_scenes table side by side: the photo | B | R1 | B 2x longer.
+
+Reads the test-view PNGs and per-image metrics that every finished round already wrote
+(<run>/round_<r>/eval/test_XXX.png, metrics.json) from the run tree of
+experiments/renerf_scenes.py (<runs>/<scene>/<row>/seed<k>) and the photos from the
+scene; trains and renders nothing. One row per scene, each image titled with its PSNR.
+The Gaussians table (experiments/results/gaussians_llff):
+
+  python experiments/test_renders.py --runs experiments/results/gaussians_llff/runs \
+    --config experiments/configs/table_gaussians.gin \
+    --scenes fern orchids room trex fortress --seed 0 \
+    --out experiments/results/gaussians_llff/test_renders_seed0.png
+"""
+import argparse
+import os
+import sys
+
+import imageio.v3 as iio
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+# pylint: disable=g-import-not-at-top
+from renerf_jax import report, resume, rundir
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import load_scene
+
+# (column title, row folder of renerf_scenes.py, round)
+COLUMNS = (('B', 'Re-Nerfing', 0), ('R1', 'Re-Nerfing', 1), ('B 2x longer', 'B 2x steps', 0))
+
+
+def round_render(run_dir, r, view):
+  """(image [H, W, 3] in [0, 1], PSNR) of test view `view` (its index in the scene) of
+  round r of a finished run. Raises SystemExit with one line if it is missing."""
+  rdir = resume.round_dir(run_dir, r)
+  png = os.path.join(rdir, 'eval', f'test_{view:03d}.png')
+  if not rundir.is_done(rdir) or not os.path.isfile(png):
+    raise SystemExit(f'error: {png} does not exist (round {r} of {run_dir} unfinished?)')
+  per_image = report.read_json(os.path.join(rdir, 'eval', 'metrics.json'))['per_image']
+  psnr = [m['psnr'] for m in per_image if m['name'] == f'test_{view:03d}']
+  return iio.imread(png)[..., :3].astype(np.float32) / 255., psnr[0] if psnr else None
+
+
+def main(argv=None):
+  p = argparse.ArgumentParser(description=__doc__,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+  p.add_argument('--runs', required=True, help='<out>/<name> of renerf_scenes.py')
+  p.add_argument('--config', required=True, nargs='+', help="the table's --config")
+  p.add_argument('--gin_bindings', action='append', default=[], help="the table's bindings")
+  p.add_argument('--data_dir', default='../shared/data/nerf_llff_data')
+  p.add_argument('--scenes', nargs='+', required=True)
+  p.add_argument('--seed', type=int, default=0)
+  p.add_argument('--test_view', type=int, default=0,
+                 help='which test view (0: the first of the split)')
+  p.add_argument('--out', required=True, help='output .png')
+  args = p.parse_args(argv)
+  fig, axes = report.subplots(len(args.scenes), 1 + len(COLUMNS),
+                              figsize=(3.2 * (1 + len(COLUMNS)), 2.6 * len(args.scenes)))
+  for row, sc in enumerate(args.scenes):
+    scene = load_scene(load_config(args.config, args.gin_bindings + [
+        f'Config.data_dir = {args.data_dir!r}', f'Config.scene = {sc!r}']))
+    if not 0 <= args.test_view < len(scene.test_idx):
+      raise SystemExit(f'error: --test_view {args.test_view}: {sc} has '
+                       f'{len(scene.test_idx)} test views')
+    view = int(scene.test_idx[args.test_view])
+    panels = [('photo', scene.images[view], None)]
+    for title, folder, r in COLUMNS:
+      img, psnr = round_render(os.path.join(args.runs, sc, folder, f'seed{args.seed}'), r,
+                               view)
+      panels.append((title, img, psnr))
+    for col, (title, img, psnr) in enumerate(panels):
+      ax = axes[row][col]
+      ax.imshow(np.clip(img, 0., 1.))
+      ax.set_xticks([])
+      ax.set_yticks([])
+      ax.set_title(f'{sc}: {title}' + (f' ({psnr:.2f} dB)' if psnr is not None else ''),
+                   fontsize=9)
+  fig.tight_layout()
+  report.save_figure(fig, args.out, dpi=110)
+  print(f'wrote {args.out}')
+
+
+if __name__ == '__main__':
+  main()

@@ -1,0 +1,173 @@
+"""Scenes in the Instant-NGP / nerfstudio `transforms.json` format.
+
+The format COLMAP conversions (`colmap2nerf.py`, `ns-process-data`) and phone capture
+apps write: one `transform_matrix` (camera-to-world, OpenGL axes as in NeRF) and
+`file_path` per frame; intrinsics `fl_x fl_y cx cy w h` at the top level or per frame,
+`camera_angle_x` (and `camera_angle_y`) where focal lengths are missing; OpenCV
+distortion `k1 k2 p1 p2`, undone on the ray directions (cameras.pixel_directions); and
+`aabb_scale`, the scene box of Instant-NGP: in NeRF's world units it is centred at the
+origin with half-size 1.5 x aabb_scale (Instant-NGP scales positions by 0.33 into a
+box of side aabb_scale), which is Scene.bbox and Scene.world_bounds here.
+
+Two layouts load:
+  <scene>/transforms.json                          a capture: frames sorted by file name,
+      every Config.llffhold-th a test view, Config.n_input_views training views evenly
+      spaced over the rest (the sparse split of ../shared/data/README.md; the other
+      frames stay in the Scene for the oracle of issue 34);
+  <scene>/transforms_train.json, transforms_test.json   NeRF-synthetic (Blender): the
+      n_input_views training views evenly spaced over train, every test view, in the
+      files' order (the order the published few-shot splits index).
+RGBA images are composited on white when Config.white_bkgd, else on black (as the
+Blender loader does). Every problem is one DataError line naming the file.
+"""
+import json
+import os
+
+import numpy as np
+
+from renerf_jax.datasets import images as image_io
+from renerf_jax.datasets.scene import Scene, fewshot_split
+from renerf_jax.errors import DataError
+
+DISTORTION_KEYS = ('k1', 'k2', 'p1', 'p2')
+
+
+def _read_json(path):
+  try:
+    with open(path) as f:
+      meta = json.load(f)
+  except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
+    raise DataError(f'cannot read {path}: {type(e).__name__}: {e}') from None
+  if not isinstance(meta, dict) or not isinstance(meta.get('frames'), list):
+    raise DataError(f'{path}: no "frames" list')
+  if not meta['frames']:
+    raise DataError(f'{path}: "frames" is empty')
+  return meta
+
+
+def _number(meta, key, path, where):
+  try:
+    v = float(meta[key])
+  except (TypeError, ValueError):
+    raise DataError(f'{path}: {where} "{key}" is not a number: {meta[key]!r}') from None
+  if not np.isfinite(v):
+    raise DataError(f'{path}: {where} "{key}" is not finite: {v}')
+  return v
+
+
+def frame_camera(meta, frame, path):
+  """(w, h, (fx, fy, cx, cy, k1, k2, p1, p2)) of one frame: its own keys over the file's.
+  w and h may be None (then the image decides, with cx, cy at its centre)."""
+  where = f'frame {frame.get("file_path", "?")!r}'
+  get = lambda key: (_number(frame, key, path, where) if key in frame else
+                     _number(meta, key, path, 'top-level') if key in meta else None)
+  w, h = get('w'), get('h')
+  fx, fy = get('fl_x'), get('fl_y')
+  angle_x, angle_y = get('camera_angle_x'), get('camera_angle_y')
+  if fx is None and angle_x is not None and w is not None:
+    fx = 0.5 * w / np.tan(0.5 * angle_x)
+  if fy is None and angle_y is not None and h is not None:
+    fy = 0.5 * h / np.tan(0.5 * angle_y)
+  fx = fx if fx is not None else fy
+  fy = fy if fy is not None else fx
+  if fx is None and angle_x is None:
+    raise DataError(f'{path}: {where} has no focal length (fl_x, fl_y or camera_angle_x)')
+  dist = tuple(get(k) or 0. for k in DISTORTION_KEYS)
+  return w, h, (fx, fy, get('cx'), get('cy')) + dist, angle_x
+
+
+def read_frames(path, sort=True):
+  """Frames of one transforms file, sorted by file name (or in the file's order).
+
+  Returns:
+    (image paths, c2w [N, 3, 4] float64, [(w, h, intrinsics, camera_angle_x)] per frame).
+  """
+  meta = _read_json(path)
+  scene_dir = os.path.dirname(path)
+  rows = []
+  for i, frame in enumerate(meta['frames']):
+    if not isinstance(frame, dict) or 'file_path' not in frame:
+      raise DataError(f'{path}: frame {i} has no "file_path"')
+    if 'transform_matrix' not in frame:
+      raise DataError(f'{path}: frame {frame["file_path"]!r} has no "transform_matrix"')
+    img = os.path.normpath(os.path.join(scene_dir, frame['file_path']))
+    if not os.path.splitext(img)[1]:
+      img += '.png'  # NeRF-synthetic names frames without their extension.
+    if not os.path.isfile(img):
+      raise DataError(f'{path}: image of frame {frame["file_path"]!r} not found: {img}')
+    try:
+      c2w = np.asarray(frame['transform_matrix'], np.float64)
+    except (TypeError, ValueError):
+      c2w = np.zeros(0)
+    if c2w.shape not in ((4, 4), (3, 4)) or not np.all(np.isfinite(c2w)):
+      raise DataError(f'{path}: frame {frame["file_path"]!r}: transform_matrix is not a '
+                      'finite 4x4 (or 3x4) matrix')
+    rows.append((frame['file_path'], img, c2w[:3, :4], frame_camera(meta, frame, path)))
+  if sort:
+    rows.sort(key=lambda r: r[0])
+  return [r[1] for r in rows], np.stack([r[2] for r in rows]), [r[3] for r in rows]
+
+
+def shared_intrinsics(cams, shapes, paths, path):
+  """The one (fx, fy, cx, cy, k1, k2, p1, p2) of all frames, checked against the image
+  sizes; DataError naming the first frame that differs."""
+  out = None
+  for (w, h, intr, angle_x), (ih, iw), img in zip(cams, shapes, paths):
+    if (w is not None and int(round(w)) != iw) or (h is not None and int(round(h)) != ih):
+      raise DataError(f'{path}: {img} is {iw}x{ih} pixels but the file gives w x h = '
+                      f'{w if w is None else int(round(w))}x'
+                      f'{h if h is None else int(round(h))}')
+    fx, fy, cx, cy = intr[:4]
+    if fx is None:  # camera_angle_x only, without w: the image's width decides.
+      fx = fy = 0.5 * iw / np.tan(0.5 * angle_x)
+    full = (fx, fy, 0.5 * iw if cx is None else cx, 0.5 * ih if cy is None else cy) + intr[4:]
+    if out is not None and not np.allclose(full, out, rtol=1e-6, atol=1e-9):
+      raise DataError(f'{path}: the intrinsics of {img} differ from the first frame\'s '
+                      '(one camera per scene is supported)')
+    out = out or full
+  return tuple(float(v) for v in out)
+
+
+def load_transforms(config) -> Scene:
+  """Loads <Config.data_dir>/<Config.scene> in either layout of the module docstring."""
+  scene_dir = os.path.join(config.data_dir, config.scene)
+  single = os.path.join(scene_dir, 'transforms.json')
+  train_file = os.path.join(scene_dir, 'transforms_train.json')
+  if os.path.isfile(single):
+    paths, poses, cams = read_frames(single)
+    train_idx, test_idx = fewshot_split(len(paths), config.n_input_views, config.llffhold)
+    meta_path = single
+  elif os.path.isfile(train_file):
+    tr_paths, tr_poses, tr_cams = read_frames(train_file, sort=False)
+    te_paths, te_poses, te_cams = read_frames(
+        os.path.join(scene_dir, 'transforms_test.json'), sort=False)
+    if config.n_input_views > len(tr_paths):
+      raise DataError(f'Config.n_input_views={config.n_input_views} but {train_file} has '
+                      f'{len(tr_paths)} frames')
+    pick = np.round(np.linspace(0, len(tr_paths) - 1, config.n_input_views)).astype(int)
+    paths = [tr_paths[i] for i in pick] + te_paths
+    poses = np.concatenate([tr_poses[pick], te_poses], 0)
+    cams = [tr_cams[i] for i in pick] + te_cams
+    train_idx = np.arange(len(pick))
+    test_idx = np.arange(len(pick), len(paths))
+    meta_path = train_file
+  else:
+    raise DataError(f'no transforms.json (or transforms_train.json) in {scene_dir}')
+  rgba = image_io.read_images(paths, keep_alpha=True)
+  rgb, alpha = rgba[..., :3], rgba[..., 3:]
+  images = rgb * alpha + (1. - alpha) if config.white_bkgd else rgb * alpha
+  intr = shared_intrinsics(cams, [images.shape[1:3]] * len(paths), paths, meta_path)
+  h, w = images.shape[1:3]
+  fx, fy, cx, cy = intr[:4]
+  pinhole = (abs(fx - fy) <= 1e-9 * fx and abs(cx - 0.5 * w) <= 1e-9 * w
+             and abs(cy - 0.5 * h) <= 1e-9 * h and not any(intr[4:]))
+  meta = _read_json(meta_path)
+  half = 1.5 * (_number(meta, 'aabb_scale', meta_path, 'top-level')
+                if 'aabb_scale' in meta else 1.)
+  box = ((-half,) * 3, (half,) * 3)
+  return Scene(name=config.scene, images=images.astype(np.float32),
+               poses=poses.astype(np.float32), focal=float(fx), near=config.near,
+               far=config.far, use_ndc=False, white_bkgd=config.white_bkgd,
+               train_idx=np.asarray(train_idx), test_idx=np.asarray(test_idx),
+               forward_facing=False, bbox=box, world_bounds=box,
+               intrinsics=None if pinhole else intr)
