@@ -9,7 +9,8 @@ Run once, outside CI, in an environment that has a CPU-capable `torch`, `gsplat`
     --out experiments/results/gaussians_gsplat_check
 
 On the same random Gaussians (some behind the camera, on the near plane, huge, tiny,
-unnormalised quaternions) and one pinhole camera it compares, in float32:
+unnormalised quaternions) and one rotated, translated pinhole camera per seed it
+compares, in float32:
   * projection: our projection.project against gsplat.cuda._torch_impl.
     _fully_fused_projection (EWA with the 0.3 px dilation, the 1.3 x fov clamp, the near
     cull, the 3-sigma radius), with 3D covariances from each side's own quaternion and
@@ -38,8 +39,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def make_gaussians(n, seed):
-  """Random Gaussians in front of the camera at the origin looking down -z, plus the
-  extreme cases of the issue."""
+  """Random Gaussians in front of a camera at the origin looking down -z (camera
+  coordinates), plus the extreme cases of the issue."""
   rng = np.random.default_rng(seed)
   means = np.c_[rng.uniform(-1.5, 1.5, (n, 2)), rng.uniform(-6., -1., n)]
   log_scales = rng.uniform(-4., -1., (n, 3))
@@ -130,10 +131,15 @@ def main(argv=None):
   import gsplat
   import torch
   h, w, focal, near = 96, 128, 110., 0.01
-  c2w = np.eye(4, dtype=np.float32)[:3]
   rows = []
   for seed in args.seeds:
-    g = make_gaussians(args.n, seed)
+    means_cam, *rest = make_gaussians(args.n, seed)
+    # A rotated, translated camera (so the OpenGL -> OpenCV view-matrix conversion is
+    # exercised); the Gaussians keep their place in front of it.
+    q, _ = np.linalg.qr(np.random.default_rng(100 + seed).normal(size=(3, 3)))
+    rot = (q * np.sign(np.linalg.det(q))).astype(np.float32)
+    c2w = np.c_[rot, np.asarray([0.5, -1., 2.], np.float32)]
+    g = (means_cam @ rot.T + c2w[:, 3],) + tuple(rest)
     row = compare(ours(*g, c2w, focal, h, w, near), theirs(*g, c2w, focal, h, w, near), h, w)
     rows.append(dict(seed=seed, **row))
     print(json.dumps(rows[-1]))

@@ -12,7 +12,6 @@ GIF (imageio) and a PNG of the middle frame. Fern, after renerf_rounds.py:
     --scene fern --out experiments/results/fern_rounds_fast_video.gif
 """
 import argparse
-import dataclasses
 import os
 import sys
 
@@ -27,8 +26,7 @@ from renerf_jax import poses as pose_lib
 from renerf_jax import renerf, report, resume, rundir
 from renerf_jax.backbones import get_backbone
 from renerf_jax.configs import load_config
-from renerf_jax.datasets import load_scene
-from renerf_jax.progress import progress_bar
+from renerf_jax.datasets import downsample_scene, load_scene
 
 
 def load_params(config, run_dir, r):
@@ -45,15 +43,6 @@ def finished_rounds(run_dir):
   while rundir.is_done(resume.round_dir(run_dir, r)):
     r += 1
   return r
-
-
-def downscaled(scene, factor):
-  """The scene with cameras of 1/factor the resolution (images only give the shape)."""
-  if factor == 1:
-    return scene
-  return dataclasses.replace(scene, images=scene.images[:, ::factor, ::factor],
-                             focal=scene.focal * scene.images[:, ::factor].shape[1]
-                             / scene.height)
 
 
 def run_parser(description):
@@ -88,18 +77,14 @@ def main():
   rounds = args.rounds or (0, finished_rounds(args.run_dir) - 1)
   params = [load_params(config, args.run_dir, r) for r in rounds]
   scene = load_scene(config)
-  small = downscaled(scene, args.downscale)
+  small = downsample_scene(scene, args.downscale)  # focal and principal point scaled
   path = pose_lib.camera_path(scene.poses, args.frames).astype(np.float32)
   render_views = get_backbone(config).render_views
-  frames = []
-  bar = progress_bar(total=len(path), desc='video', unit='frame')
-  for i in range(len(path)):
-    imgs = [np.clip(render_views(config, small, prm, path[i:i + 1])['rgb'][0], 0., 1.)
-            for prm in params]
-    gap = np.ones((small.height, 4, 3), np.float32)
-    frames.append(report.to_uint8(np.concatenate([imgs[0], gap, imgs[1]], 1)))
-    bar.update(1)
-  bar.close()
+  # Each model renders the whole path in one call (one compilation of its rays).
+  videos = [np.clip(render_views(config, small, prm, path, show_progress=True)['rgb'],
+                    0., 1.) for prm in params]
+  gap = np.ones((small.height, 4, 3), np.float32)
+  frames = [report.to_uint8(np.concatenate([a, gap, b], 1)) for a, b in zip(*videos)]
   os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
   tmp = args.out + '.tmp.gif'
   iio.imwrite(tmp, np.stack(frames), duration=1000. / args.fps, loop=0)

@@ -104,10 +104,10 @@ def parser():
 
 def merged_rows(paths):
   """Rows of finished tables, merged: ({scene: {label: {seed: metrics}}}, seeds, their
-  commands, (config, gin_bindings, data_dir)). Raises SystemExit with one line on a
-  missing/unreadable file, on tables of different settings, or on one (scene, row, seed)
-  with two different results."""
-  rows, seeds, commands, setting = {}, [], [], None
+  commands, (config, gin_bindings, data_dir), backbone). Raises SystemExit with one line
+  on a missing/unreadable file, on tables of different settings, or on one (scene, row,
+  seed) with two different results."""
+  rows, seeds, commands, setting, backbone = {}, [], [], None, 'nerf'
   for path in paths:
     try:
       table = report.read_json(path)
@@ -120,6 +120,7 @@ def merged_rows(paths):
       raise SystemExit(f'--merge: {path} was made with --config/--gin_bindings/--data_dir '
                        f'{this}, not {setting} as {paths[0]}')
     setting = this
+    backbone = table.get('backbone', 'nerf')  # tables made before it was stored: NeRF
     commands.append(table['command'])
     for scene, labels in table_rows.items():
       for label, by_seed in labels.items():
@@ -131,7 +132,7 @@ def merged_rows(paths):
           have[int(seed)] = m
           if int(seed) not in seeds:
             seeds.append(int(seed))
-  return rows, sorted(seeds), commands, setting
+  return rows, sorted(seeds), commands, setting, backbone
 
 
 def run(config, scene, run_dir, share=()):
@@ -295,7 +296,7 @@ def markdown(summary, scenes, command, sources=(), backbone='nerf'):
     lines.append(f"| {label} | {e['scenes']} | {fmt_triple(p)} | {mp} | {fmt_triple(q)} |")
   if summary['paper_R1_delta_mean']:
     pm = summary['paper_R1_delta_mean']
-    lines.append(f"| paper R1 (these scenes) | | {pm['psnr']:+.2f} | {pm['ssim']:+.3f} | "
+    lines.append(f"| paper R1 - RegNeRF (these scenes) | | {pm['psnr']:+.2f} | {pm['ssim']:+.3f} | "
                  f"{pm['lpips_alex']:+.3f} | | | | |")
   if backbone == 'gaussians':
     b, r1 = PAPER_3DGS_360
@@ -348,13 +349,13 @@ def main(argv=None):
       sys.argv if argv is None else ['experiments/renerf_scenes.py'] + list(argv))
   table = args.table or args.name
   if args.merge:
-    all_rows, seeds, sources, (config, gin_bindings, data_dir) = merged_rows(args.merge)
+    all_rows, seeds, sources, (config, _, _), backbone = merged_rows(args.merge)
     scenes = list(all_rows)
     summary = summarize(all_rows, scenes, seeds)
-    backbone = load_config(config, gin_bindings + [f'Config.data_dir = {data_dir!r}']).backbone
     write_table(args.out, table, {'name': args.name, 'config': config, 'seeds': seeds,
-                                  'rows': all_rows, 'summary': summary, 'command': command,
-                                  'sources': sources}, scenes, command, sources, backbone)
+                                  'backbone': backbone, 'rows': all_rows, 'summary': summary,
+                                  'command': command, 'sources': sources},
+                scenes, command, sources, backbone)
     return
   if not args.config:
     p.error('--config is required unless --merge is given')
@@ -367,9 +368,11 @@ def main(argv=None):
   bindings = args.gin_bindings + [f'Config.data_dir = {args.data_dir!r}']
   all_rows = {sc: scene_runs(args, sc, bindings) for sc in args.scenes}
   summary = summarize(all_rows, args.scenes, args.seeds)
+  backbone = load_config(args.config, bindings).backbone
   write_table(args.out, table, {'name': args.name, 'config': args.config, 'seeds': args.seeds,
-                                'rows': all_rows, 'summary': summary, 'command': command},
-              args.scenes, command, backbone=load_config(args.config, bindings).backbone)
+                                'backbone': backbone, 'rows': all_rows, 'summary': summary,
+                                'command': command},
+              args.scenes, command, backbone=backbone)
 
 
 def write_table(out, table, result, scenes, command, sources=(), backbone='nerf'):

@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # pylint: disable=g-import-not-at-top
-from renerf_jax import cli, jit_cache, report, resume, rundir
+from renerf_jax import cli, contraction, jit_cache, report, resume, rundir
 from renerf_jax import uncertainty_quality as uq
 from renerf_jax import uncertainty_signals as us
 from renerf_jax.configs import load_config
@@ -87,7 +87,8 @@ def test_errors(scene, out):
 
 def compute_run(config, scene, params, panel_view):
   """Both Hessian passes, then every signal on the test views and one pseudo-view."""
-  lo, hi = (np.asarray(b, np.float32) for b in scene.bbox)
+  box = contraction.CONTRACTED_BOX if config.contraction else scene.bbox  # as renerf.py
+  lo, hi = (np.asarray(b, np.float32) for b in box)
   tables, info = us.hessian_tables(config, params, ray_pool(scene, scene.train_idx)['rays'],
                                    lo, hi, show_progress=True)
   t0 = time.perf_counter()

@@ -62,6 +62,10 @@ class Config:
   # multiple of k), for the small CPU table configs; 1: off.
   image_downsample: int = 1
   n_input_views: int = 3  # Few-shot training views (RegNeRF split).
+  # transforms.json captures: camera centres moved so the point nearest every optical
+  # axis is the origin, then scaled so the farthest camera is at distance 1 (the scene
+  # box with them), as mip-NeRF 360 places unbounded scenes for its contraction.
+  normalize_poses: bool = False
   llffhold: int = 8  # Every llffhold-th image is a test view.
   white_bkgd: bool = False  # Composite on white (Blender).
   use_ndc: bool = True  # NDC space for forward-facing scenes; never for 360 scenes.
@@ -99,7 +103,11 @@ class Config:
   resample_padding: float = 0.01
   stop_level_grad: bool = True
   ray_shape: str = 'cylinder'  # 'cone' or 'cylinder'.
-  lindisp: bool = False  # Samples evenly spaced in disparity (unbounded scenes).
+  lindisp: bool = False  # Samples evenly spaced in disparity.
+  # Unbounded scenes: mip-NeRF 360's spacing, half the samples linear on [near, 1], half
+  # in disparity on [1, far] (with the cameras within distance 1 of the scene centre:
+  # Config.normalize_poses); overrides lindisp.
+  piecewise_spacing: bool = False
   # Unbounded scenes: sample Gaussians contracted into radius 2 before the fields
   # (contraction.py): '' (none), 'l2' (mip-NeRF 360's ball) or 'inf' (nerfacto's cube);
   # set grid_box to ((-2, -2, -2), (2, 2, 2)) with it.
@@ -263,6 +271,9 @@ class Config:
     _check(self.dataset_loader in ('llff', 'transforms', 'blender', 'procedural'),
            f'Config.dataset_loader={self.dataset_loader!r} (llff, transforms, blender or '
            'procedural)')
+    _check(not self.piecewise_spacing or self.near < 1. < self.far,
+           f'Config.piecewise_spacing needs near < 1 < far, not near={self.near}, '
+           f'far={self.far}')
     _check(self.contraction in ('', 'l2', 'inf'),
            f"Config.contraction={self.contraction!r} ('', 'l2' or 'inf')")
     _check(not (self.contraction and self.use_ndc),

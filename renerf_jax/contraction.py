@@ -16,6 +16,9 @@ import jax
 import jax.numpy as jnp
 
 _EPS = 1e-12
+# Where contract() puts all of space (either order): the box of a grid or deformation
+# field over contracted space.
+CONTRACTED_BOX = ((-2., -2., -2.), (2., 2., 2.))
 
 
 def _norm(x, order):

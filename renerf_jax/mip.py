@@ -8,6 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from renerf_jax import contraction
+
 _TINY = 1e-10
 
 
@@ -139,7 +141,7 @@ def ipe_feature_mask(band_mask):
 
 
 def sample_along_rays(key, origins, directions, radii, num_samples, near, far, randomized,
-                      lindisp, ray_shape):
+                      lindisp, ray_shape, piecewise=False):
   """Stratified samples between near and far.
 
   Args:
@@ -147,12 +149,16 @@ def sample_along_rays(key, origins, directions, radii, num_samples, near, far, r
     origins, directions: [..., 3]. radii, near, far: [..., 1].
     num_samples: S. randomized: jitter within strata. lindisp: linear in disparity.
     ray_shape: 'cone' or 'cylinder'.
+    piecewise: mip-NeRF 360's spacing (contraction.s_to_t: half the samples linear on
+      [near, 1], half in disparity on [1, far]; needs near < 1 < far); overrides lindisp.
 
   Returns:
     (t_vals [..., S + 1], (means, cov_diags) each [..., S, 3]).
   """
   u = jnp.linspace(0., 1., num_samples + 1)
-  if lindisp:
+  if piecewise:
+    t_vals = contraction.s_to_t(u, near, far, piecewise=True)
+  elif lindisp:
     t_vals = 1. / (1. / jnp.maximum(near, _TINY) * (1. - u) + 1. / far * u)
   else:
     t_vals = near * (1. - u) + far * u

@@ -104,7 +104,8 @@ def render_rays(config, params, rays, key, train: bool,
       n = config.proposal_samples if proposal else config.num_samples
       t_vals, (means, covs) = mip.sample_along_rays(
           k_sample, rays.origins, rays.directions, rays.radii, n,
-          rays.near, rays.far, randomized, config.lindisp, config.ray_shape)
+          rays.near, rays.far, randomized, config.lindisp, config.ray_shape,
+          config.piecewise_spacing)
     else:
       t_vals, (means, covs) = mip.resample_along_rays(
           k_sample, rays.origins, rays.directions, rays.radii, t_vals, weights, randomized,

@@ -21,7 +21,7 @@ import flax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import random_poses, report, training
+from renerf_jax import contraction, random_poses, report, training
 from renerf_jax.datasets import camera_rays, ray_pool
 from renerf_jax.errors import ConfigError
 from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses, render_pseudo_views
@@ -123,7 +123,9 @@ def masked_pseudo_views(config, scene, params, poses, show_progress=False, sigma
   """
   from renerf_jax import uncertainty  # pylint: disable=g-import-not-at-top
   t0 = time.perf_counter()
-  lo, hi = scene.bbox
+  # The deformation grid spans the space the fields see: the contracted cube with
+  # Config.contraction (as Bayes' Rays does on unbounded scenes), else the scene box.
+  lo, hi = contraction.CONTRACTED_BOX if config.contraction else scene.bbox
   rays = camera_rays(scene, None, poses)
   res = uncertainty.compute_masks(config, params, ray_pool(scene, scene.train_idx)['rays'],
                                   rays, np.asarray(lo), np.asarray(hi),

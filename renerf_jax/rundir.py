@@ -116,10 +116,18 @@ class TrainingLog:
     return (done % self.config.print_every == 0 or done == self.config.max_steps
             or self._eval_now(done) or self._ckpt_now(done))
 
+  def stop_clock(self):
+    """Ends the timed stretch of steps (call it right after fetching the step's stats:
+    what is read from the state after it is not training time)."""
+    if self.t_last is not None:
+      self.train_seconds += time.perf_counter() - self.t_last
+      self.t_last = None
+
   def record(self, done, state, fields, postfix=None):
     """Logs step `done`: fields (after step, train_seconds, time), the test PSNR where
-    due, a progress-bar postfix; checkpoints state where due. Returns the record."""
-    self.train_seconds += time.perf_counter() - self.t_last
+    due, a progress-bar postfix; checkpoints state where due; restarts the clock.
+    Returns the record."""
+    self.stop_clock()
     rec = {'step': done, 'train_seconds': self.train_seconds,
            'time': self.time_offset + self.train_seconds}
     rec.update(fields)

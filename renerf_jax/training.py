@@ -362,6 +362,7 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
     bar.update(1)
     if log.due(done):
       stats = jax.device_get(stats)
+      log.stop_clock()
       fields = {'loss': float(stats['loss']), 'psnr': float(stats['psnr']),
                 'lr': float(stats['lr']), 'nan_skips': int(state.nan_skips),
                 'pseudo_rays': int(stats['pseudo_rays'])}

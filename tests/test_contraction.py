@@ -95,10 +95,13 @@ def test_renderer_gives_the_fields_contracted_samples_out_to_the_far_shell():
   from renerf_jax import cameras, training  # pylint: disable=g-import-not-at-top
   from renerf_jax.errors import ConfigError  # pylint: disable=g-import-not-at-top
   from renerf_jax.model import render_rays  # pylint: disable=g-import-not-at-top
-  for kind, norm in (('l2', lambda m: jnp.linalg.norm(m, axis=-1)),
-                     ('inf', lambda m: jnp.max(jnp.abs(m), axis=-1))):
-    cfg = tiny_config(use_ndc=False, contraction=kind, lindisp=True, num_samples=32,
-                      grid_box=((-2., -2., -2.), (2., 2., 2.)))
+  for kind, norm, extra in (
+      ('l2', lambda m: jnp.linalg.norm(m, axis=-1), dict(lindisp=True)),
+      ('inf', lambda m: jnp.max(jnp.abs(m), axis=-1),  # the density-only proposal level
+       dict(piecewise_spacing=True, sampler='proposal', proposal_samples=32,
+            field='grid'))):
+    cfg = tiny_config(use_ndc=False, contraction=kind, num_samples=32,
+                      grid_box=((-2., -2., -2.), (2., 2., 2.)), near=0.2, far=1e3, **extra)
     params = training.init_state(cfg, jax.random.PRNGKey(0)).params
     d = jnp.asarray(_dirs(16, seed=3), jnp.float32)
     ones = jnp.ones((16, 1), jnp.float32)
@@ -115,7 +118,31 @@ def test_renderer_gives_the_fields_contracted_samples_out_to_the_far_shell():
     assert all(hi <= 2. + 1e-5 and hi > 1.99 for _, hi, _ in seen), seen
     assert all(lo < 1. for _, _, lo in seen), seen  # the near samples stay uncontracted
     for out in outs:
-      for k in ('rgb', 'distance', 'acc', 'weights'):
+      for k in ('distance', 'acc', 'weights') + (('rgb',) if 'rgb' in out else ()):
         assert np.all(np.isfinite(np.asarray(out[k]))), k
   with pytest.raises(ConfigError, match='not NDC'):
     tiny_config(use_ndc=True, contraction='l2')
+  with pytest.raises(ConfigError, match='near < 1 < far'):
+    tiny_config(use_ndc=False, piecewise_spacing=True, near=2., far=10.)
+
+
+def test_laplace_deformation_grid_spans_the_space_the_fields_see(monkeypatch):
+  """With Config.contraction the Bayes' Rays deformation grid covers the contracted
+  cube (where the offsets act), else the scene's box."""
+  from conftest import tiny_config  # pylint: disable=g-import-not-at-top
+  from renerf_jax import renerf, uncertainty  # pylint: disable=g-import-not-at-top
+  from renerf_jax.datasets import load_scene  # pylint: disable=g-import-not-at-top
+  seen = []
+
+  def fake_masks(config, params, train_rays, rays, lo, hi, **kw):
+    seen.append((tuple(np.asarray(lo).tolist()), tuple(np.asarray(hi).tolist())))
+    raise StopIteration
+  monkeypatch.setattr(uncertainty, 'compute_masks', fake_masks)
+  for kind in ('l2', ''):
+    cfg = tiny_config(use_ndc=False, contraction=kind)
+    scene = load_scene(cfg)
+    with pytest.raises(StopIteration):
+      renerf.masked_pseudo_views(cfg, scene, None, scene.poses[:1])
+  assert seen[0] == contraction.CONTRACTED_BOX
+  assert seen[1] == tuple(tuple(float(v) for v in b) for b in scene.bbox)
+  assert seen[1] != seen[0]

@@ -317,3 +317,30 @@ def test_equal_time_comparison_takes_given_idle_rates_and_per_method_seeds(tmp_p
                          check=False)
     assert bad.returncode != 0 and message in bad.stderr, bad.stderr[-2000:]
     assert 'Traceback' not in bad.stderr
+
+
+def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_backbone(
+    tmp_path):
+  """renerf_scenes.py on the Gaussians backbone: the paper's 3DGS delta (mip-NeRF 360,
+  +0.81 dB) beside ours, and --merge keeps the backbone from the tables' JSON."""
+  sys.path.insert(0, str(REPO / 'experiments'))
+  import renerf_scenes  # pylint: disable=g-import-not-at-top
+  m = lambda p: {'psnr': p, 'ssim': 0.5, 'lpips_alex': 0.3, 'cumulative_seconds': 10.}
+  rows = {'fern': {'B': {0: m(14.), 1: m(15.)}, 'R1': {0: m(14.5), 1: m(14.9)}}}
+  summary = renerf_scenes.summarize(rows, ['fern'], [0, 1])
+  assert summary['scenes']['fern']['R1']['paired']['psnr'][:3] == pytest.approx(
+      (0.2, np.std([0.5, -0.1], ddof=1), 1))
+  gs = renerf_scenes.markdown(summary, ['fern'], 'cmd', backbone='gaussians')
+  assert '| paper R1 - 3DGS (mip-NeRF 360, 30 views: no LLFF 3DGS rows) | | +0.81 |' in gs
+  assert 'paper R1 - 3DGS' not in renerf_scenes.markdown(summary, ['fern'], 'cmd')
+  paths = []
+  for seed, backbone in ((0, 'gaussians'), (1, 'gaussians')):
+    path = tmp_path / f't{seed}.json'
+    path.write_text(json.dumps({
+        'command': 'python experiments/renerf_scenes.py --name x --config c.gin',
+        'backbone': backbone,
+        'rows': {'fern': {k: {str(seed): v[seed]} for k, v in rows['fern'].items()}}}))
+    paths.append(str(path))
+  merged, seeds, _, _, backbone = renerf_scenes.merged_rows(paths)
+  assert backbone == 'gaussians' and seeds == [0, 1]
+  assert merged['fern']['R1'] == rows['fern']['R1']

@@ -259,3 +259,47 @@ def test_all_masked_pseudo_views_leave_a_pixel_mix_of_real_rays_only():
   cam = training.Camera.of(load_scene(config))
   state, stats = training.train_step(config, cam, True, state, pools, jax.random.PRNGKey(2))
   assert float(stats['pseudo_rays']) == 0 and np.isfinite(float(stats['loss']))
+
+
+def test_training_log_times_the_steps_only_and_writes_records_in_order(tmp_path,
+                                                                      monkeypatch):
+  """rundir.TrainingLog, the logging edge of both training loops: training time stops at
+  stop_clock (reading the state and evaluating are not training), records keep their
+  key order, evaluated records join the curve, the last step is checkpointed."""
+  import flax  # pylint: disable=g-import-not-at-top
+  clock = [0.]
+  monkeypatch.setattr(rundir.time, 'perf_counter', lambda: clock[0])
+
+  @flax.struct.dataclass
+  class State:
+    step: np.ndarray
+    params: np.ndarray
+
+  class Bar:
+    postfix = None
+
+    def set_postfix(self, **kw):
+      self.postfix = kw
+
+  def eval_fn(params):
+    clock[0] += 100.
+    return float(params) + 20.
+  cfg = tiny_config(max_steps=4, print_every=2, eval_every=4, checkpoint_every=100)
+  bar, curve = Bar(), []
+  log = rundir.TrainingLog(cfg, str(tmp_path), eval_fn, 5., curve, 1000., bar)
+  for done in range(1, 5):
+    clock[0] += 1.  # one training step
+    if log.due(done):
+      log.stop_clock()
+      clock[0] += 50.  # reading the state: not training
+      log.record(done, State(step=np.asarray(done), params=np.asarray(0.5)),
+                 {'loss': 0.25, 'psnr': 10., 'x': done}, postfix={'n': done})
+  assert [log.due(d) for d in range(1, 5)] == [False, True, False, True]
+  recs = rundir.read_jsonl(rundir.training_paths(str(tmp_path))[1])
+  assert [list(r) for r in recs] == [
+      ['step', 'train_seconds', 'time', 'loss', 'psnr', 'x'],
+      ['step', 'train_seconds', 'time', 'loss', 'psnr', 'x', 'eval_psnr']]
+  assert [(r['train_seconds'], r['time']) for r in recs] == [(7., 1007.), (9., 1009.)]
+  assert recs[1]['eval_psnr'] == 20.5 and curve == [recs[1]] and log.train_seconds == 9.
+  assert bar.postfix == {'loss': '0.2500', 'psnr': '10.00', 'n': 4, 'test': '20.50'}
+  assert [s for s, _ in rundir.list_checkpoints(rundir.training_paths(str(tmp_path))[0])] == [4]

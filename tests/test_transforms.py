@@ -139,6 +139,10 @@ def test_camera_angle_fallback_and_per_frame_intrinsics(tmp_path):
     ('no_focal', 'has no focal length'),
     ('bad_number', '"fl_x" is not a number'),
     ('bad_matrix', 'transform_matrix is not a finite 4x4'),
+    ('fisheye', "camera model 'OPENCV_FISHEYE' is not supported"),
+    ('k3', 'distortion coefficient "k3" is not supported'),
+    ('path_type', 'frame 1 has no "file_path" string'),
+    ('too_few', 'transforms.json: Config.n_input_views=9 but only 2 non-test images'),
 ])
 def test_bad_transforms_files_fail_in_one_line_naming_the_file(tmp_path, case, message):
   frames = [_frame(i, fl_x=5.) for i in range(3)]
@@ -160,12 +164,21 @@ def test_bad_transforms_files_fail_in_one_line_naming_the_file(tmp_path, case, m
     frames[0]['fl_x'] = 'five'
   elif case == 'bad_matrix':
     frames[1]['transform_matrix'] = [[1., 0.], [0., float('nan')]]
+  elif case == 'fisheye':
+    top = dict(camera_model='OPENCV_FISHEYE')
+  elif case == 'k3':
+    frames[2]['k3'] = 0.01
+  elif case == 'path_type':
+    images = ['images/00.png', 'images/02.png']
+    frames[1]['file_path'] = 7
   root = tmp_path / case
   if frames is None:
     cfg = _write_scene(root, [_frame(0)])
     (root / 's' / 'transforms.json').write_text(json.dumps({'fl_x': 5.}))
   else:
     cfg = _write_scene(root, frames, images, **top)
+  if case == 'too_few':
+    cfg = dataclasses.replace(cfg, n_input_views=9)
   with pytest.raises(DataError) as e:
     load_scene(cfg)
   text = str(e.value)
@@ -179,3 +192,21 @@ def test_gaussians_refuse_cameras_with_intrinsics():
   with pytest.raises(DataError, match="scene 'fox': the Gaussians render centred pinhole"):
     Camera.of(scene)
   assert Camera.of(dataclasses.replace(scene, intrinsics=None)).focal == scene.focal
+
+
+def test_normalized_poses_put_the_focus_point_at_the_origin_and_cameras_within_one():
+  from renerf_jax.datasets import transforms  # pylint: disable=g-import-not-at-top
+  raw = load_scene(_fox())
+  scene = load_scene(_fox(normalize_poses=True))
+  dist = np.linalg.norm(scene.poses[:, :3, 3], axis=-1)
+  assert float(dist.max()) == pytest.approx(1., abs=1e-6) and float(dist.min()) > 0.3
+  np.testing.assert_allclose(transforms.focus_point(scene.poses.astype(np.float64)), 0.,
+                             atol=1e-5)
+  np.testing.assert_array_equal(scene.poses[:, :3, :3], raw.poses[:, :3, :3])
+  # Relative camera geometry is kept up to the one scale; the box moves with it.
+  _, centre, scale = transforms.normalize_poses(raw.poses.astype(np.float64))
+  np.testing.assert_allclose(scene.poses[:, :3, 3],
+                             (raw.poses[:, :3, 3] - centre) * scale, atol=1e-5)
+  np.testing.assert_allclose(np.asarray(scene.bbox),
+                             (np.asarray(raw.bbox) - centre) * scale, atol=1e-5)
+  np.testing.assert_array_equal(scene.images, raw.images)

@@ -18,7 +18,11 @@ Two layouts load:
       n_input_views training views evenly spaced over train, every test view, in the
       files' order (the order the published few-shot splits index).
 RGBA images are composited on white when Config.white_bkgd, else on black (as the
-Blender loader does). Every problem is one DataError line naming the file.
+Blender loader does). Config.normalize_poses moves and scales the cameras as mip-NeRF
+360 places unbounded scenes (the focus point of the optical axes at the origin, the
+farthest camera at distance 1); nerfstudio's own files carry no aabb_scale and are not
+normalised otherwise, so the default box (half-size 1.5) may not hold such a scene
+without it. Every problem is one DataError line naming the file.
 """
 import json
 import os
@@ -30,6 +34,10 @@ from renerf_jax.datasets.scene import Scene, fewshot_split
 from renerf_jax.errors import DataError
 
 DISTORTION_KEYS = ('k1', 'k2', 'p1', 'p2')
+# Camera models whose rays this loader makes (pinhole with OpenCV's k1 k2 p1 p2);
+# fisheye and the 8-coefficient model are refused, not silently misread.
+CAMERA_MODELS = ('OPENCV', 'PINHOLE', 'SIMPLE_PINHOLE', 'SIMPLE_RADIAL', 'RADIAL')
+UNSUPPORTED_KEYS = ('k3', 'k4', 'k5', 'k6')
 
 
 def _read_json(path):
@@ -56,11 +64,21 @@ def _number(meta, key, path, where):
 
 
 def frame_camera(meta, frame, path):
-  """(w, h, (fx, fy, cx, cy, k1, k2, p1, p2)) of one frame: its own keys over the file's.
-  w and h may be None (then the image decides, with cx, cy at its centre)."""
+  """(w, h, (fx, fy, cx, cy, k1, k2, p1, p2), camera_angle_x) of one frame: its own keys
+  over the file's. w, h, fx, fy, cx, cy and camera_angle_x may be None (then the image
+  decides: cx, cy at its centre, fx from camera_angle_x and its width)."""
   where = f'frame {frame.get("file_path", "?")!r}'
   get = lambda key: (_number(frame, key, path, where) if key in frame else
                      _number(meta, key, path, 'top-level') if key in meta else None)
+  model = frame.get('camera_model', meta.get('camera_model', 'OPENCV'))
+  if model not in CAMERA_MODELS or frame.get('is_fisheye', meta.get('is_fisheye', False)):
+    raise DataError(f'{path}: {where}: camera model {model!r}'
+                    f'{" (fisheye)" if model in CAMERA_MODELS else ""} is not supported '
+                    f'(pinhole with k1 k2 p1 p2: {", ".join(CAMERA_MODELS)})')
+  for key in UNSUPPORTED_KEYS:
+    if get(key):
+      raise DataError(f'{path}: {where}: distortion coefficient "{key}" is not supported '
+                      '(only k1 k2 p1 p2)')
   w, h = get('w'), get('h')
   fx, fy = get('fl_x'), get('fl_y')
   angle_x, angle_y = get('camera_angle_x'), get('camera_angle_y')
@@ -86,8 +104,8 @@ def read_frames(path, sort=True):
   scene_dir = os.path.dirname(path)
   rows = []
   for i, frame in enumerate(meta['frames']):
-    if not isinstance(frame, dict) or 'file_path' not in frame:
-      raise DataError(f'{path}: frame {i} has no "file_path"')
+    if not isinstance(frame, dict) or not isinstance(frame.get('file_path'), str):
+      raise DataError(f'{path}: frame {i} has no "file_path" string')
     if 'transform_matrix' not in frame:
       raise DataError(f'{path}: frame {frame["file_path"]!r} has no "transform_matrix"')
     img = os.path.normpath(os.path.join(scene_dir, frame['file_path']))
@@ -128,6 +146,29 @@ def shared_intrinsics(cams, shapes, paths, path):
   return tuple(float(v) for v in out)
 
 
+def focus_point(poses):
+  """The point nearest (least squares) every camera's optical axis (-z in OpenGL)."""
+  origins, axes = poses[:, :3, 3], -poses[:, :3, 2]
+  axes = axes / np.linalg.norm(axes, axis=-1, keepdims=True)
+  proj = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]  # onto each axis' normal
+  return np.linalg.solve(proj.sum(0), np.einsum('nij,nj->i', proj, origins))
+
+
+def normalize_poses(poses):
+  """Camera centres moved so the focus point is the origin and scaled so the farthest
+  camera is at distance 1 (rotations unchanged).
+
+  Returns:
+    (poses [N, 3, 4], the focus point [3] in the input's units, the scale).
+  """
+  centre = focus_point(poses)
+  offsets = poses[:, :3, 3] - centre
+  scale = 1. / max(float(np.max(np.linalg.norm(offsets, axis=-1))), 1e-12)
+  out = np.array(poses, np.float64)
+  out[:, :3, 3] = offsets * scale
+  return out, centre, scale
+
+
 def load_transforms(config) -> Scene:
   """Loads <Config.data_dir>/<Config.scene> in either layout of the module docstring."""
   scene_dir = os.path.join(config.data_dir, config.scene)
@@ -135,7 +176,11 @@ def load_transforms(config) -> Scene:
   train_file = os.path.join(scene_dir, 'transforms_train.json')
   if os.path.isfile(single):
     paths, poses, cams = read_frames(single)
-    train_idx, test_idx = fewshot_split(len(paths), config.n_input_views, config.llffhold)
+    try:
+      train_idx, test_idx = fewshot_split(len(paths), config.n_input_views,
+                                          config.llffhold)
+    except DataError as e:
+      raise DataError(f'{single}: {e}') from None
     meta_path = single
   elif os.path.isfile(train_file):
     tr_paths, tr_poses, tr_cams = read_frames(train_file, sort=False)
@@ -164,7 +209,11 @@ def load_transforms(config) -> Scene:
   meta = _read_json(meta_path)
   half = 1.5 * (_number(meta, 'aabb_scale', meta_path, 'top-level')
                 if 'aabb_scale' in meta else 1.)
-  box = ((-half,) * 3, (half,) * 3)
+  box = np.array([(-half,) * 3, (half,) * 3])
+  if config.normalize_poses:
+    poses, centre, scale = normalize_poses(poses)
+    box = (box - centre) * scale
+  box = tuple(tuple(float(v) for v in b) for b in box)
   return Scene(name=config.scene, images=images.astype(np.float32),
                poses=poses.astype(np.float32), focal=float(fx), near=config.near,
                far=config.far, use_ndc=False, white_bkgd=config.white_bkgd,

@@ -491,6 +491,7 @@ def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=N
     bar.update(1)
     if log.due(done):
       stats = jax.device_get(stats)
+      log.stop_clock()
       n = int(jnp.sum(state.params.active))
       log.record(done, state, {
           'loss': float(stats['loss']), 'psnr': float(stats['psnr']),
