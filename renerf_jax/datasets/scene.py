@@ -32,6 +32,8 @@ class Scene:
   world_bounds: Optional[tuple] = None
   # Camera intrinsics shared by every view when not the centred pinhole of `focal`:
   # (fx, fy, cx, cy, k1, k2, p1, p2), pixels and OpenCV distortion (transforms.json).
+  # Every view's rays use them (camera_rays); the random unobserved poses of RegNeRF's
+  # depth TV are virtual cameras and stay the centred pinhole of `focal` = fx.
   intrinsics: Optional[tuple] = None
 
   @property
