@@ -88,7 +88,8 @@ def main():
   p.add_argument('--counts', type=int, nargs='+',
                  default=[1000, 5000, 20000, 50000, 100000])
   p.add_argument('--repeats', type=int, default=10)
-  p.add_argument('--tile_cap', type=int, default=None, help='Config.gs_tile_cap')
+  p.add_argument('--tile_cap', type=int, default=None,
+                 help='Config.gs_tile_cap (0: no cap)')
   p.add_argument('--out', default=os.path.join(REPO, 'benchmarks', 'results',
                                                'gaussians'))
   args = p.parse_args()
@@ -96,7 +97,7 @@ def main():
   for k in args.downsample:
     bindings = [f'Config.image_downsample = {k}', "Config.data_dir = '" + os.path.join(
         os.path.dirname(REPO), 'shared', 'data', 'nerf_llff_data') + "'"]
-    if args.tile_cap:
+    if args.tile_cap is not None:
       bindings.append(f'Config.gs_tile_cap = {args.tile_cap}')
     config = load_config([os.path.join(REPO, 'gin_configs', 'gaussians_llff3.gin')],
                          bindings)
@@ -110,7 +111,8 @@ def main():
     for n in args.counts:
       train_s, render_s, bound, compile_s = bench_gaussians(config, scene, n,
                                                             args.repeats)
-      rows.append({'model': f'3DGS (tile cap {config.gs_tile_cap})', 'image': size,
+      cap = config.gs_tile_cap or 'none'
+      rows.append({'model': f'3DGS (tile cap {cap})', 'image': size,
                    'gaussians': n, 'train_s': train_s, 'render_s': render_s,
                    'cap_bound': bound, 'compile_s': compile_s})
       print(rows[-1], flush=True)

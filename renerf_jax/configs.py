@@ -137,7 +137,9 @@ class Config:
   gs_capacity: int = 20000  # Gaussian slots; densification fills the inactive ones.
   gs_init_points: int = 5000  # Random initial Gaussians, uniform in Scene.world_bounds.
   gs_init_opacity: float = 0.1  # Their opacity (3DGS: 0.1).
-  gs_tile_cap: int = 64  # At most this many Gaussians (the nearest) per 16x16 tile.
+  gs_init_knn: bool = True  # Their scale: 3DGS's 3-nearest-neighbour distance (else the
+  # box spacing, box side / gs_init_points^(1/3)).
+  gs_tile_cap: int = 0  # At most this many Gaussians (the nearest) per 16x16 tile; 0: all.
   gs_extent: float = 0.  # Scene extent (lr, densify sizes); 0: 3DGS's 1.1 x camera radius.
   gs_sh_interval_frac: float = 1000 / 30000  # SH degree +1 every this (3DGS: 1000), to 3.
   gs_densify_from_frac: float = 500 / 30000  # Densify after this step (3DGS: 500)...
@@ -290,7 +292,8 @@ class Config:
            f'{self.gs_init_points} >= 1')
     _check(0. < self.gs_init_opacity < 1.,
            f'Config.gs_init_opacity={self.gs_init_opacity} must lie in (0, 1)')
-    _check(self.gs_tile_cap >= 1, f'Config.gs_tile_cap={self.gs_tile_cap} must be >= 1')
+    _check(self.gs_tile_cap >= 0,
+           f'Config.gs_tile_cap={self.gs_tile_cap} must be >= 0 (0: no cap)')
     _check(self.gs_extent >= 0., f'Config.gs_extent={self.gs_extent} must be >= 0')
     for name in ('gs_sh_interval_frac', 'gs_densify_every_frac',
                  'gs_opacity_reset_every_frac'):

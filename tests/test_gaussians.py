@@ -80,6 +80,66 @@ def test_tiled_rasteriser_matches_dense_reference(cap_mode):
                              atol=0.05)
 
 
+@pytest.mark.parametrize('chunk', [8, 32])
+def test_rasteriser_vjp_matches_autodiff_of_the_dense_reference(chunk):
+  """The custom VJP (back to front from the final transmittance) against autodiff of the
+  box-culled dense oracle, float64, with uncapped lists spanning many chunks and pixels
+  that end early (T below 1e-4)."""
+  g = _scene(0, 150, log_scale=(-2., -0.8))
+  proj, colours, opac = _screen(g, _pose())
+  with jax.enable_x64(True):
+    f64 = lambda x: jnp.asarray(np.asarray(x), jnp.float64)
+    args = [f64(x) for x in (proj.means2d, proj.conics, colours,
+                             np.minimum(1.5 * np.asarray(opac), 1.), proj.depths)]
+    bg = f64(BG)
+    ids, count = tiles.tile_intersect(f64(proj.means2d), f64(proj.radius), args[4],
+                                      proj.valid, H, W, cap=0)
+    assert ids.shape == (4, 150) and int(count.max()) > 3 * chunk
+    _, _, _, stop_slot, k = rasterize._forward(jnp.asarray(ids), *args, H, W, 16, chunk)
+    ended = np.asarray(stop_slot) < 150
+    assert ended.any() and not ended.all()  # Some pixels end early, some do not.
+    rng = np.random.default_rng(1)
+    wts = [jnp.asarray(rng.normal(size=s)) for s in [(H, W, 3), (H, W), (H, W)]]
+
+    def weighted(out):
+      return (jnp.sum(out[0] * wts[0]) + 0.1 * jnp.sum(out[1] * wts[1]) +
+              jnp.sum(out[2] * wts[2]))
+
+    def ours(*a):
+      return weighted(rasterize.rasterize(ids, *a[:5], H, W, a[5], chunk=chunk))
+
+    def ref(*a):
+      return weighted(reference.dense_reference(*a[:5], proj.valid, H, W, a[5],
+                                                radius=f64(proj.radius), tile=16))
+
+    v0, g0 = jax.value_and_grad(ours, argnums=range(6))(*args, bg)
+    v1, g1 = jax.value_and_grad(ref, argnums=range(6))(*args, bg)
+    np.testing.assert_allclose(float(v0), float(v1), rtol=1e-10)
+    names = ('means2d', 'conics', 'colours', 'opacities', 'depths', 'background')
+    for name, a, b in zip(names, g0, g1):
+      assert np.abs(np.asarray(b)).max() > 1e-3, name
+      np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-8,
+                                 atol=1e-10 * np.abs(np.asarray(b)).max(), err_msg=name)
+
+
+def test_uncapped_lists_hold_every_overlap_and_match_the_reference():
+  g = _scene(2, 300)
+  proj, colours, opac = _screen(g, _pose())
+  ids, count = tiles.tile_intersect(proj.means2d, proj.radius, proj.depths, proj.valid, H,
+                                    W, cap=0)
+  assert ids.shape == (4, 300) and int(count.max()) > 256
+  out = render.render(g, jnp.asarray(_pose(), jnp.float32), FOCAL, H, W, 3, BG, 0)
+  assert float(out['cap_bound']) == 0.
+  ref = reference.dense_reference(proj.means2d, proj.conics, colours, opac, proj.depths,
+                                  proj.valid, H, W, BG, radius=proj.radius, tile=16)
+  for k, want in zip(('rgb', 'depth', 'acc'), ref):
+    np.testing.assert_allclose(out[k], want, atol=2e-5, err_msg=k)
+  # A cap of 8 keeps exactly the first 8 entries of each uncapped list.
+  ids8, _ = tiles.tile_intersect(proj.means2d, proj.radius, proj.depths, proj.valid, H, W,
+                                 cap=8)
+  np.testing.assert_array_equal(ids8, np.asarray(ids)[:, :8])
+
+
 def test_tile_lists_are_depth_sorted_and_padded():
   g = _scene(1, 60)
   proj, _, _ = _screen(g, _pose())
@@ -274,8 +334,8 @@ def test_inactive_slots_change_nothing_and_get_zero_gradients():
   assert float(out_c['acc'].max()) > 0.5
   for k in ('rgb', 'depth', 'acc'):
     np.testing.assert_array_equal(out_g[k], out_c[k])
-  for a, b in zip(grads_g, grads_c):
-    np.testing.assert_array_equal(a, b)
+  for a, b in zip(grads_g, grads_c):  # (Equal on CPU; GPU scatter-adds vary in order.)
+    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7 * np.abs(np.asarray(b)).max())
     assert np.all(np.asarray(a[n:]) == 0.)
     assert np.abs(np.asarray(a[:n])).max() > 0.
   # A slot with a NaN field is not rendered even when marked active.

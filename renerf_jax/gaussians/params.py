@@ -31,11 +31,44 @@ class Gaussians:
   active: jnp.ndarray  # [N] bool; inactive slots are ignored entirely.
 
 
-def random_init(key, n, lo, hi, capacity=None, init_opacity=0.1, scale_factor=1.):
+def knn_scales(points, k=3, block=1024):
+  """3DGS's initial scale: sqrt(mean squared distance to the k nearest other points).
+
+  Args:
+    points: [N, 3] (N >= 2). k: neighbours (N - 1 if fewer).
+    block: rows of the [block, N] distance matrix computed at a time.
+
+  Returns:
+    [N] scales, at least sqrt(1e-7) (3DGS clamps the squared distance at 1e-7).
+  """
+  points = jnp.asarray(points, jnp.float32)
+  n = points.shape[0]
+  if n < 2:
+    raise ValueError(f'knn_scales needs at least 2 points, got {n}')
+  k = min(k, n - 1)
+  block = min(block, n)
+
+  @jax.jit
+  def rows(start):  # Mean squared distance of rows start..start+block to their k nearest.
+    p = jax.lax.dynamic_slice_in_dim(points, start, block)
+    d2 = jnp.sum((p[:, None, :] - points[None, :, :])**2, -1)
+    self_ = start + jnp.arange(block)[:, None] == jnp.arange(n)[None, :]
+    return jnp.mean(-jax.lax.top_k(-jnp.where(self_, jnp.inf, d2), k)[0], axis=-1)
+
+  out = []
+  for start in range(0, n, block):
+    first = min(start, n - block)  # The last block overlaps the previous one.
+    out.append(rows(first)[start - first:])
+  return jnp.sqrt(jnp.maximum(jnp.concatenate(out), 1e-7))
+
+
+def random_init(key, n, lo, hi, capacity=None, init_opacity=0.1, scale_factor=1.,
+                knn=False):
   """Gaussians uniform in the box [lo, hi], isotropic, grey, of low opacity.
 
   Each scale is `scale_factor` * mean box side / n^(1/3) (the spacing of n points in the
-  box); rotations are the identity, the opacity is `init_opacity` (logit(0.1) as in
+  box), or with `knn` 3DGS's: the root mean squared distance to the 3 nearest points;
+  rotations are the identity, the opacity is `init_opacity` (logit(0.1) as in
   3DGS), and all SH coefficients are zero, i.e. colour 0.5 grey from every side.
 
   Args:
@@ -45,6 +78,7 @@ def random_init(key, n, lo, hi, capacity=None, init_opacity=0.1, scale_factor=1.
     capacity: total slots (>= n, default n); slots n.. are inactive copies.
     init_opacity: initial opacity in (0, 1).
     scale_factor: multiplies the initial scale.
+    knn: 3DGS's nearest-neighbour scales instead of the box spacing.
 
   Returns:
     Gaussians with N = capacity.
@@ -55,8 +89,12 @@ def random_init(key, n, lo, hi, capacity=None, init_opacity=0.1, scale_factor=1.
   lo = jnp.asarray(lo, jnp.float32)
   hi = jnp.asarray(hi, jnp.float32)
   means = lo + (hi - lo) * jax.random.uniform(key, (capacity, 3))
-  scale = scale_factor * jnp.mean(hi - lo) / float(n)**(1. / 3.)
-  log_scales = jnp.full((capacity, 3), jnp.log(scale))
+  if knn and n >= 2:
+    scale = jnp.zeros((capacity,)).at[:n].set(knn_scales(means[:n]))
+    log_scales = jnp.log(jnp.maximum(scale_factor * scale, 1e-7))[:, None] * jnp.ones(3)
+  else:
+    scale = scale_factor * jnp.mean(hi - lo) / float(n)**(1. / 3.)
+    log_scales = jnp.full((capacity, 3), jnp.log(scale))
   quats = jnp.tile(jnp.array([1., 0., 0., 0.]), (capacity, 1))
   logit = float(np.log(init_opacity / (1. - init_opacity)))
   return Gaussians(
@@ -100,7 +138,7 @@ def covariance_3d(log_scales, quats):
     [..., 3, 3] symmetric positive semi-definite matrices.
   """
   m = quat_to_rotmat(quats) * jnp.exp(log_scales)[..., None, :]
-  return m @ jnp.swapaxes(m, -1, -2)
+  return jnp.matmul(m, jnp.swapaxes(m, -1, -2), precision=jax.lax.Precision.HIGHEST)
 
 
 def sh_basis(degree, dirs):
@@ -150,5 +188,6 @@ def eval_sh(degree, sh, dirs):
   """
   basis = sh_basis(degree, dirs)
   nb = basis.shape[-1]
-  rgb = jnp.einsum('...k,...kc->...c', basis, sh[..., :nb, :])
+  rgb = jnp.einsum('...k,...kc->...c', basis, sh[..., :nb, :],
+                   precision=jax.lax.Precision.HIGHEST)  # float32, also on GPUs.
   return jnp.maximum(rgb + 0.5, 0.)

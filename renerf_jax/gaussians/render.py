@@ -48,7 +48,8 @@ def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, c
     height, width: static image size.
     sh_degree: static SH degree used for colour, 0..3.
     background: [3] colour (default black).
-    cap: static maximum number of Gaussians blended per tile.
+    cap: static maximum number of Gaussians blended per tile (the nearest); 0: no cap,
+      every Gaussian that touches a tile is blended.
     near: near-plane depth.
     tile: static tile size.
     means2d_offset: optional [N, 2] pixel offset added to the projected means (zeros:
@@ -60,6 +61,13 @@ def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, c
     (fraction of tiles with more than `cap` Gaussians), count [T] (Gaussians per tile),
     valid [N] and radius [N] (the projection's culling mask and pixel radii).
   """
+  with jax.default_matmul_precision('highest'):  # No TF32 on GPUs: pixel-exact geometry.
+    return _render(gaussians, c2w, focal, height, width, sh_degree, background, cap, near,
+                   tile, means2d_offset)
+
+
+def _render(gaussians, c2w, focal, height, width, sh_degree, background, cap, near, tile,
+            means2d_offset):
   dtype = gaussians.means.dtype
   background = (jnp.zeros(3, dtype) if background is None
                 else jnp.asarray(background, dtype))
@@ -76,5 +84,6 @@ def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, c
   rgb, depth, acc = rasterize_lib.rasterize(ids, means2d, proj.conics, colours,
                                             opacities, proj.depths, height, width,
                                             background, tile)
-  return dict(rgb=rgb, depth=depth, acc=acc, cap_bound=jnp.mean(count > cap),
+  cap_bound = jnp.mean(count > cap) if cap else jnp.zeros((), dtype)
+  return dict(rgb=rgb, depth=depth, acc=acc, cap_bound=cap_bound,
               count=count, valid=proj.valid, radius=proj.radius)

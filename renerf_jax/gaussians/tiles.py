@@ -1,13 +1,14 @@
-"""Tile intersection: which Gaussians touch which 16x16 tile, front to back, capped.
+"""Tile intersection: which Gaussians touch which 16x16 tile, front to back.
 
 Static shapes: the image is cut into T = ceil(H / tile) * ceil(W / tile) tiles in
 row-major order (tile t covers columns [tx * tile, (tx + 1) * tile) and rows
-[ty * tile, (ty + 1) * tile), t = ty * tiles_x + tx), and each tile keeps at most `cap`
-Gaussians, the nearest ones.
+[ty * tile, (ty + 1) * tile), t = ty * tiles_x + tx), and each tile keeps a list of
+static length: every Gaussian that touches it (no cap, length N), or at most `cap`, the
+nearest ones.
 
-Cost: a dense [T, N] depth-key matrix and a top-k per tile, O(T N) time and memory
-(e.g. 1200 tiles x 1e5 Gaussians = 1.2e8 keys, ~0.5 GB in float32), fine for small images
-and N up to ~1e5, unlike the sort-by-(tile, depth) key of the CUDA reference.
+Cost: a dense [T, N] overlap matrix, O(T N) time and memory (e.g. 768 tiles x 1e5
+Gaussians = 7.7e7 entries), fine for small images and N up to ~1e5, unlike the flat
+sort-by-(tile, depth) key of the CUDA reference, whose length is dynamic.
 """
 import functools
 
@@ -39,25 +40,32 @@ def tile_overlap(means2d, radius, valid, height, width, tile=16):
 def tile_intersect(means2d, radius, depths, valid, height, width, tile=16, cap=64):
   """Per tile, the ids of the (at most `cap`) nearest Gaussians touching it.
 
+  One depth sort of all Gaussians, then each tile's overlapping ones are packed in that
+  order (a running count per tile): O(N log N + T N), no per-tile sort.
+
   Args:
     means2d: [N, 2] pixel centres of the Gaussians. radius: [N] pixel radii.
     depths: [N] view depths (the sort key, nearest first).
     valid: [N] bool; invalid Gaussians touch nothing.
-    height, width, tile, cap: static ints.
+    height, width, tile: static ints.
+    cap: static list length; 0 or None: N (no cap, every overlap is kept).
 
   Returns:
-    ids: [T, cap] int32 Gaussian ids sorted front to back (ties: lower id first), padded
-      with the sentinel N, which the rasteriser skips.
+    ids: [T, cap or N] int32 Gaussian ids sorted front to back (ties: lower id first),
+      padded with the sentinel N, which the rasteriser skips.
     count: [T] int32, how many Gaussians touch each tile; count > cap means the cap bound
       and the farthest count - cap of them were dropped.
   """
   means2d, radius, depths = jax.lax.stop_gradient((means2d, radius, depths))
   n = means2d.shape[0]
+  length = cap if cap else n
   overlap = tile_overlap(means2d, radius, valid, height, width, tile)
-  key = jnp.where(overlap, depths, jnp.inf)
-  if cap > n:
-    key = jnp.pad(key, ((0, 0), (0, cap - n)), constant_values=jnp.inf)
-  neg_key, ids = jax.lax.top_k(-key, cap)
-  ids = jnp.where(jnp.isfinite(neg_key), ids, n).astype(jnp.int32)
+  order = jnp.argsort(jnp.where(valid, depths, jnp.inf), stable=True).astype(jnp.int32)
+  hit = overlap[:, order]  # [T, N] in depth order.
+  pos = jnp.cumsum(hit, axis=1, dtype=jnp.int32) - 1
+  pos = jnp.where(hit, pos, length)  # Misses (and overflow beyond the cap) are dropped.
+  rows = jnp.broadcast_to(jnp.arange(hit.shape[0])[:, None], hit.shape)
+  ids = jnp.full((hit.shape[0], length), n, jnp.int32)
+  ids = ids.at[rows, pos].set(jnp.broadcast_to(order, hit.shape), mode='drop')
   count = jnp.sum(overlap, axis=1, dtype=jnp.int32)
   return ids, count

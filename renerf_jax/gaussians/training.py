@@ -113,13 +113,15 @@ def world_box(scene):
 def init_gaussians(config, scene, key):
   """config.gs_init_points random grey Gaussians uniform in the scene's world box.
 
-  No SfM points: params.random_init (isotropic, scale = the points' spacing, opacity
+  No SfM points: params.random_init (isotropic; scale = the distance to the 3 nearest
+  points as in 3DGS, or the points' spacing without config.gs_init_knn; opacity
   config.gs_init_opacity) in a capacity of config.gs_capacity slots.
   """
   lo, hi = world_box(scene)
   return params_lib.random_init(key, config.gs_init_points, lo, hi,
                                 capacity=config.gs_capacity,
-                                init_opacity=config.gs_init_opacity)
+                                init_opacity=config.gs_init_opacity,
+                                knn=config.gs_init_knn)
 
 
 def scene_extent(config, scene):
