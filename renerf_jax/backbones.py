@@ -26,7 +26,7 @@ from typing import Callable, Optional
 import jax
 import numpy as np
 
-from renerf_jax import metrics, renerf, training
+from renerf_jax import metrics, pseudo_views, renerf, training
 from renerf_jax.datasets import camera_rays
 from renerf_jax.errors import ConfigError
 from renerf_jax.evaluation import cheap_eval_fn, evaluate_test_views, evaluate_views
@@ -119,6 +119,8 @@ def synthesize_by_rendering(render_views: Callable, config, scene, params,
     (PseudoViews, timing, meta) as renerf.synthesize.
   """
   from renerf_jax import uncertainty  # pylint: disable=g-import-not-at-top
+  if config.pseudo_source == 'photo':
+    return pseudo_views.photo_pseudo_views(config, scene)
   if config.use_masks and config.mask_signal != 'one_minus_acc':
     raise ConfigError(f'Config.mask_signal={config.mask_signal!r} needs the NeRF '
                       f'backbone; Config.backbone={config.backbone!r} masks with '

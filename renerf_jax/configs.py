@@ -232,6 +232,9 @@ class Config:
   # '+' combination such as 'interp+test'.
   pseudo_n_random: int = _f(4, 'pseudo_poses')
   # Random unobserved poses for pseudo_targets 'random'.
+  pseudo_source: str = _f('render', 'pseudo_poses')
+  # 'render' (B's renders: Re-Nerfing) or 'photo' (the oracle: the real photos at the
+  # unused views, with pseudo_targets 'unused').
   # --- Laplace uncertainty (Bayes' Rays style) and masks ---
   use_masks: bool = _f(False, 'masks')
   # Mask uncertain pseudo-view pixels (with mask_signal 'laplace': after the Hessian pass).
@@ -325,6 +328,8 @@ class Config:
            f'Config.distortion_loss_mult={self.distortion_loss_mult} must be >= 0')
     _check(self.proposal_samples >= 2,
            f'Config.proposal_samples={self.proposal_samples} must be >= 2')
+    _check(self.pseudo_source in ('render', 'photo'),
+           f'Config.pseudo_source={self.pseudo_source!r} (render or photo)')
     _check(self.pseudo_schedule in ('early', 'all', 'late'),
            f'Config.pseudo_schedule={self.pseudo_schedule!r} (early, all or late)')
     _check(self.renerf_init in ('reset', 'continue'),

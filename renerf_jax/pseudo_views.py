@@ -42,7 +42,9 @@ def pseudo_view_poses(config, scene):
   lerp, rotation SLERP; pairs from config.sequencing). 'test': the test poses (the
   paper's "optimising for specific views"). 'random': config.pseudo_n_random random
   unobserved poses, drawn like the depth-TV poses (the control for 'test' in the view
-  selection table). Targets combine with '+', e.g. 'interp+test'.
+  selection table). 'unused': the poses of the photos the split leaves unused (neither
+  training nor test views; with Config.pseudo_source='photo' the oracle trains on those
+  photos themselves). Targets combine with '+', e.g. 'interp+test'.
 
   Returns:
     (poses [M, 3, 4] float32, meta: list of dicts).
@@ -50,9 +52,16 @@ def pseudo_view_poses(config, scene):
   out, meta = [], []
   targets = config.pseudo_targets.split('+')
   for t in targets:
-    if t not in ('interp', 'test', 'random'):
+    if t not in ('interp', 'test', 'random', 'unused'):
       raise ConfigError(f'Config.pseudo_targets={config.pseudo_targets!r} '
-                        "(interp, test, random or a '+' combination)")
+                        "(interp, test, random, unused or a '+' combination)")
+  if config.pseudo_source == 'photo' and targets != ['unused']:
+    raise ConfigError(f"Config.pseudo_source='photo' needs Config.pseudo_targets="
+                      f"'unused', not {config.pseudo_targets!r}: real photos exist only "
+                      'at the unused views (test photos are never trained on)')
+  if config.pseudo_source == 'photo' and config.use_masks:
+    raise ConfigError("Config.pseudo_source='photo' takes no masks (set Config.use_masks"
+                      '=False): every pixel of a photo is real')
   if 'interp' in targets:
     train = np.asarray(scene.poses[scene.train_idx], np.float64)
     if len(train) < 2:
@@ -70,7 +79,36 @@ def pseudo_view_poses(config, scene):
   if 'random' in targets:
     out.append(random_target_poses(config, scene))
     meta += [{'kind': 'random', 'index': i} for i in range(config.pseudo_n_random)]
+  if 'unused' in targets:
+    idx = unused_views(scene)
+    if not len(idx):
+      raise ConfigError(f'Config.pseudo_targets={config.pseudo_targets!r}: scene '
+                        f'{scene.name!r} has no unused photos (each one trains or tests)')
+    out.append(np.asarray(scene.poses[idx], np.float64))
+    meta += [{'kind': 'unused', 'view': int(i)} for i in idx]
   return np.concatenate(out, 0).astype(np.float32), meta
+
+
+def unused_views(scene):
+  """Indices of the scene's photos that are neither training nor test views, ascending."""
+  used = set(np.asarray(scene.train_idx).tolist()) | set(np.asarray(scene.test_idx).tolist())
+  return np.array([i for i in range(len(scene.poses)) if i not in used], np.int64)
+
+
+def photo_pseudo_views(config, scene):
+  """The oracle's pseudo-views: the real photos at the unused views, in place of B's
+  renders at the same poses (Config.pseudo_source='photo', pseudo_targets='unused').
+
+  Returns:
+    (PseudoViews with masks of ones, timing {'seconds', 'render_seconds': 0}, meta).
+  """
+  t0 = time.perf_counter()
+  poses, meta = pseudo_view_poses(config, scene)
+  images = np.asarray(scene.images[np.array([m['view'] for m in meta])], np.float32)
+  m, h, w = images.shape[:3]
+  pv = PseudoViews(images=images, poses=poses, masks=np.ones((m, h, w), np.float32),
+                   uncertainty=np.zeros((m, h, w), np.float32))
+  return pv, {'seconds': time.perf_counter() - t0, 'render_seconds': 0.}, meta
 
 
 def random_target_poses(config, scene):

@@ -21,7 +21,7 @@ import flax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import contraction, random_poses, report, training
+from renerf_jax import contraction, pseudo_views, random_poses, report, training
 from renerf_jax.datasets import camera_rays, ray_pool
 from renerf_jax.errors import ConfigError
 from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses, render_pseudo_views
@@ -101,6 +101,8 @@ def synthesize(config, scene, params, show_progress=False, sigma_fn=None, view_c
     `seconds` with the seconds it took when it was done, so sharing never makes a round
     look cheaper.
   """
+  if config.pseudo_source == 'photo':
+    return pseudo_views.photo_pseudo_views(config, scene)
   t0 = time.perf_counter()
   poses, meta = pseudo_view_poses(config, scene)
   if config.use_masks:
@@ -195,8 +197,9 @@ def check_rounds_config(config, scene):
   """Raises ConfigError now for pseudo-view settings that round 1 could not use.
 
   Without this, a single training view with interpolated pseudo-views (no neighbouring
-  pair to interpolate), a bad Config.interp_factors or Config.pseudo_targets would only
-  fail after the baseline had trained. With num_rounds = 0 nothing is checked (the
+  pair to interpolate), a bad Config.interp_factors or Config.pseudo_targets, or the
+  oracle (Config.pseudo_source='photo') with masks, would only fail after the baseline
+  had trained. With num_rounds = 0 nothing is checked (the
   baseline alone needs no pseudo-views).
   """
   if config.num_rounds > 0:

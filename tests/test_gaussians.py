@@ -447,6 +447,27 @@ def test_random_init():
                              rtol=1e-5)
 
 
+
+def test_knn_scales_match_brute_force_and_clamp_duplicates():
+  rng = np.random.default_rng(7)
+  pts = rng.uniform(-1., 1., (300, 3)).astype(np.float32)
+  pts[5] = pts[6] = pts[7] = pts[8]  # Four copies: their 3 nearest are at distance 0.
+  d2 = np.sum((pts[:, None].astype(np.float64) - pts[None]) ** 2, -1)
+  np.fill_diagonal(d2, np.inf)
+  want = np.sqrt(np.maximum(np.sort(d2, 1)[:, :3].mean(1), 1e-7))
+  got = np.asarray(params.knn_scales(pts, block=128))  # Blocks that do not divide 300.
+  np.testing.assert_allclose(got, want, rtol=1e-4)
+  np.testing.assert_allclose(got[5:9], np.sqrt(1e-7), rtol=1e-5)
+  np.testing.assert_allclose(params.knn_scales(pts[:2]), [np.sqrt(d2[0, 1])] * 2, rtol=1e-5)
+  with pytest.raises(ValueError, match='at least 2 points'):
+    params.knn_scales(pts[:1])
+  g = params.random_init(jax.random.PRNGKey(1), 100, [-1., 0., 2.], [1., 2., 4.],
+                         capacity=128, knn=True)
+  np.testing.assert_allclose(np.exp(g.log_scales[:100, 0]),
+                             params.knn_scales(g.means[:100]), rtol=1e-5)
+  assert np.all(np.isfinite(np.asarray(g.log_scales)))
+
+
 # ----------------------------------------------------------------------------- SH
 
 

@@ -1,10 +1,11 @@
+import dataclasses
 import os
 
 import jax
 import numpy as np
 import pytest
 
-from renerf_jax import renerf, resume, rundir
+from renerf_jax import backbones, pseudo_views, renerf, resume, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.pseudo_views import pseudo_view_poses, uncertainty_heatmap
 from renerf_jax.errors import ConfigError
@@ -63,6 +64,39 @@ def test_pseudo_view_poses_7x_on_three_views():
     pseudo_view_poses(tiny_config(pseudo_targets='interp+views'), scene)
   with pytest.raises(ConfigError, match='interp_factors'):
     pseudo_view_poses(tiny_config(interp_factors='0.5,1.5'), scene)
+
+
+def test_oracle_trains_on_the_photos_the_split_leaves_unused():
+  config = tiny_config(num_rounds=1, pseudo_targets='unused', pseudo_source='photo')
+  scene = load_scene(config)
+  unused = pseudo_views.unused_views(scene)
+  train, test = set(scene.train_idx.tolist()), set(scene.test_idx.tolist())
+  assert len(unused) > 0 and not set(unused.tolist()) & (train | test)
+  assert sorted(set(unused.tolist()) | train | test) == list(range(len(scene.poses)))
+  poses, meta = pseudo_view_poses(config, scene)
+  np.testing.assert_array_equal(poses, scene.poses[unused])
+  assert [m['view'] for m in meta] == unused.tolist()
+  # Every backbone's synthesis hands the photos over untouched, with no mask.
+  for pv, _, _ in (renerf.synthesize(config, scene, None),
+                   backbones.synthesize_by_rendering(None, config, scene, None)):
+    np.testing.assert_array_equal(pv.images, scene.images[unused])
+    assert pv.masks.min() == 1.
+  # A round: D trains on them (B's renders at the same poses differ from the photos).
+  state = renerf.run_rounds(config, scene)
+  np.testing.assert_array_equal(state.pseudo.images, scene.images[unused])
+  renders, _, _ = renerf.synthesize(dataclasses.replace(config, pseudo_source='render'), scene,
+                                    state.params)
+  assert renders.images.shape == state.pseudo.images.shape
+  assert np.abs(renders.images - state.pseudo.images).max() > 0.05
+  with pytest.raises(ConfigError, match='pseudo_targets'):
+    pseudo_view_poses(dataclasses.replace(config, pseudo_targets='interp+unused'), scene)
+  with pytest.raises(ConfigError, match='use_masks'):  # Before the baseline trains.
+    renerf.check_rounds_config(dataclasses.replace(config, use_masks=True), scene)
+  with pytest.raises(ConfigError, match='pseudo_source'):
+    tiny_config(pseudo_source='photos')
+  every = tiny_config(pseudo_targets='unused', n_input_views=len(scene.poses) - len(test))
+  with pytest.raises(ConfigError, match='no unused photos'):
+    pseudo_view_poses(every, load_scene(every))
 
 
 def test_rounds_schedule_resume_and_masks(tmp_path):

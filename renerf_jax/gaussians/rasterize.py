@@ -122,8 +122,11 @@ def _forward(tile_ids, means2d, conics, colours, opacities, depths, height, widt
     return (k + 1, trans * keep[..., -1], done | any_stop, stop_slot, rgb, dep)
 
   shape = px.shape
-  init = (jnp.zeros((), jnp.int32), jnp.ones(shape, dtype), jnp.zeros(shape, bool),
-          jnp.full(shape, length, jnp.int32), jnp.zeros(shape + (3,), dtype),
+  # The padding pixels of the last tile row and column (outside the image) start done,
+  # with nothing composited (stop slot 0), so they never keep the loop going.
+  outside = (px > width) | (py > height)
+  init = (jnp.zeros((), jnp.int32), jnp.ones(shape, dtype), outside,
+          jnp.where(outside, 0, length).astype(jnp.int32), jnp.zeros(shape + (3,), dtype),
           jnp.zeros(shape, dtype))
   k, trans, _, stop_slot, rgb, dep = jax.lax.while_loop(cond_fn, body, init)
   return rgb, dep, trans, stop_slot, k
