@@ -11,7 +11,7 @@ of PSNR / SSIM / LPIPS and the paired gain of 2N over N (same seed).
 
 Invocations can be split by scene or seed; each writes the table of every finished run
 it finds. The converged-regime config on 2 CPU cores (experiments/configs/
-table_converged.gin), fern, seed 0 (experiments/results/converged8.md):
+table_converged.gin), fern, seed 0 (experiments/results/converged_baseline_llff/converged8.md):
 
   python experiments/convergence.py --name converged8 \
     --config experiments/configs/table_converged.gin --scenes fern \

@@ -9,7 +9,7 @@ GIF (imageio) and a PNG of the middle frame. Fern, after renerf_rounds.py:
     --run_dir experiments/results/fern_rounds_fast/Re-Nerfing/seed0 \
     --config gin_configs/llff3_fast.gin gin_configs/renerf.gin \
     --data_dir ../shared/data/nerf_llff_data \
-    --scene fern --out experiments/results/fern_rounds_fast_video.gif
+    --scene fern --out experiments/results/renerf_rounds_fern/fern_rounds_fast_video.gif
 """
 import argparse
 import os

@@ -8,7 +8,7 @@ seeds with a fixed step count per round.
 Fern on the 2-core CPU with the hour-budget table config
 (experiments/configs/table_tiny.gin: the small config at 126x94 with 512 rays a step)
 and the Laplace masks on (the full method),
-experiments/results/fern_rounds_tiny.md, in one invocation of 53 min (rounds
+experiments/results/renerf_rounds_fern/fern_rounds_tiny.md, in one invocation of 53 min (rounds
 26.6 min, equal-time control 26.5 min; a masked round 2.4 min):
 
   python experiments/renerf_rounds.py --name fern_rounds_tiny \
@@ -16,8 +16,8 @@ experiments/results/fern_rounds_tiny.md, in one invocation of 53 min (rounds
     --scene fern --seeds 0 1 2 --variant 'Re-Nerfing (masks)=Config.use_masks=True'
 
 With the small table config (table_small.gin, see table_why.py: 252x189, 1024
-rays a step), the same table is experiments/results/fern_rounds_small.md, which takes
-longer than an hour. The rounds of three seeds took 49 min (an
+rays a step), the same table is
+experiments/results/renerf_rounds_fern/fern_rounds_small.md, which takes longer than an hour. The rounds of three seeds took 49 min (an
 invocation of 17 min, killed and resumed by a second of 32 min), the equal-time control
 39 min more (a third invocation, without --no_equal_time: it reuses the finished rounds):
 

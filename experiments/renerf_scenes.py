@@ -14,8 +14,9 @@ Runs live in <out>/<name>/<scene>/<row>/seed<k> (resumable; finished runs are re
 invocations can be split by scene, seed and variant, each rewriting the table from every
 finished run it finds; --table writes a subset of them to other files). The
 converged-regime table on 2 CPU cores (five scenes x 3 seeds, run split by scene;
-experiments/results/scenes_conv2.md), and its attribution rows on seed 0 (further
---variant rows, the mix and the factors, as in experiments/results/README.md):
+experiments/results/renerf_r1_converged_llff/scenes_conv2.md), and its attribution rows on
+seed 0 (further --variant rows, the mix and the factors, as in
+experiments/results/renerf_attribution_converged_llff/README.md):
 
   python experiments/renerf_scenes.py --name scenes_conv2 \
     --config experiments/configs/table_converged2.gin \
@@ -27,10 +28,11 @@ experiments/results/scenes_conv2.md), and its attribution rows on seed 0 (furthe
     --variant 'K 0.5=Config.pseudo_until_frac = 0.5'
 
 Tables made separately (e.g. one per scene, in parallel) are put into one with --merge,
-which reads their .json rows and trains nothing (experiments/results/scenes_conv3.md):
+which reads their .json rows and trains nothing
+(experiments/results/renerf_r1_converged_llff/scenes_conv3.md):
 
   python experiments/renerf_scenes.py --name scenes_conv3 --merge \
-    experiments/results/scenes_conv3_{fern,orchids,room,trex,fortress}.json
+    experiments/results/renerf_r1_converged_llff/scenes_conv3_{fern,orchids,room,trex,fortress}.json
 
 Writes <out>/<name>.json, <name>.md and <name>.png (paired deltas per scene; --table
 names them otherwise).

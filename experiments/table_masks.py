@@ -7,7 +7,7 @@ the Hessian pass runs and the most uncertain pixels are left out of the loss). T
 variants share one baseline per seed (taken from the rounds table with --baseline_from).
 Fern on the 2-core CPU with the hour-budget table config (table_tiny.gin: 126x94,
 512 rays a step), baselines and '+ masks' from its rounds table: 8.9 min for three
-seeds, experiments/results/fern_masks_tiny.md:
+seeds, experiments/results/masks_ablation_fern/fern_masks_tiny.md:
 
   python experiments/table_masks.py --name fern_masks_tiny \
     --config experiments/configs/table_tiny.gin --data_dir ../shared/data/nerf_llff_data \
@@ -18,7 +18,7 @@ With the small table config (table_small.gin, see table_why.py), baselines and
 the '+ masks' rounds taken from the rounds table
 (renerf_rounds.py: the same config with Config.use_masks=True, so its R1 is this
 table's '+ masks' and is copied, not trained again): 21.5 min for three seeds,
-experiments/results/fern_masks_small.md:
+experiments/results/masks_ablation_fern/fern_masks_small.md:
 
   python experiments/table_masks.py --name fern_masks_small \
     --config experiments/configs/table_small.gin --data_dir ../shared/data/nerf_llff_data \
@@ -28,8 +28,8 @@ experiments/results/fern_masks_small.md:
 Without the rounds table's runs it trains the baselines and '+ masks' too (about 20 min
 more: a baseline ~2.5 min, a masked round ~4 min a seed).
 
-Fast grid backbone at full resolution: experiments/results/fern_masks_fast.md was made
-with the 650-step llff3_fast_renerf.gin of commit d6dd94a (restore it with
+Fast grid backbone at full resolution:
+experiments/results/masks_ablation_fern/fern_masks_fast.md was made with the 650-step llff3_fast_renerf.gin of commit d6dd94a (restore it with
 `git checkout d6dd94a -- gin_configs` to resume or reproduce), the baselines taken from
 the baseline table made with the same config:
 

@@ -9,8 +9,8 @@ and a variant still counts the seconds its views took.
 
 Fern on the 2-core CPU with the hour-budget table config (table_tiny.gin: 126x94,
 512 rays a step), baselines from its rounds table (renerf_rounds.py): 49.6 min for
-three seeds, experiments/results/fern_views_tiny.md. The first invocation of the command
-below died after 42.7 min and 26 of the 30 rounds ("LLVM compilation error: Cannot
+three seeds, experiments/results/view_selection_fern/fern_views_tiny.md. The first
+invocation of the command below died after 42.7 min and 26 of the 30 rounds ("LLVM compilation error: Cannot
 allocate memory": every run's compiled steps were kept and their memory mappings reached
 Linux's 65530, fixed since by jit_cache.release_compiled between runs); the same command
 resumed with the fix and finished the last four rounds in 6.9 min:
@@ -23,8 +23,8 @@ resumed with the fix and finished the last four rounds in 6.9 min:
 With the small table config (table_small.gin, see table_why.py: 252x189, 1024
 rays a step), baselines from the rounds table (renerf_rounds.py): ten rounds of
 2.3-2.6 min per seed (training ~2 min, evaluation ~18 s, a new pseudo-view ~4.5 s),
-87 min for three seeds, experiments/results/fern_views_small.md. The runs resume, so it
-was split over three invocations (C below the table's args): five variants (41 min),
+87 min for three seeds, experiments/results/view_selection_fern/fern_views_small.md. The
+runs resume, so it was split over three invocations (C below the table's args): five variants (41 min),
 five more (45 min: killed after 8 min and resumed) and one with all variants that only
 collects them (21 s). The presets that hold one another ran in the same invocation so
 that they share their views; the second took its baselines from the first's 7x runs, so

@@ -9,7 +9,7 @@ Round 1 variants on top of one shared baseline per seed:
 Fern on the 2-core CPU with the small table config (experiments/configs/table_small.gin:
 the fast grid backbone at half resolution, 400 steps): measured 45 min for three seeds
 (12.6 min for seed 0 alone on an idle CPU; seeds 1 and 2 shared the CPU with the test
-suite for part of their time), experiments/results/fern_why_small.md:
+suite for part of their time), experiments/results/why_ablation_fern/fern_why_small.md:
 
   python experiments/table_why.py --name fern_why_small \
     --config experiments/configs/table_small.gin --data_dir ../shared/data/nerf_llff_data \

@@ -12,7 +12,8 @@ Fern, after renerf_rounds.py:
     --run_dir experiments/results/fern_rounds_fast/Re-Nerfing/seed0 \
     --config gin_configs/llff3_fast.gin gin_configs/renerf.gin \
     --data_dir ../shared/data/nerf_llff_data \
-    --scene fern --work_dir /tmp/fern_masks --out experiments/results/fern_uncertainty
+    --scene fern --work_dir /tmp/fern_masks \
+    --out experiments/results/masks_ablation_fern/fern_uncertainty
 """
 import dataclasses
 import os

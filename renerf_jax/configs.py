@@ -242,7 +242,8 @@ class Config:
   # The uncertainty the masks threshold: a Hessian-free signal of one render,
   # 'one_minus_acc' (the default: the lowest mean AUSE over six scenes),
   # 'depth_variance', 'weight_entropy' (renerf_jax/uncertainty_signals.py), or 'laplace'
-  # (the Bayes'-Rays-style Hessian pass below). experiments/results/uq_tiny.md compares them.
+  # (the Bayes'-Rays-style Hessian pass below).
+  # experiments/results/uncertainty_quality_llff/uq_tiny.md compares them.
   deform_log2_res: int = _f(8, 'hessian')
   # L: the deformation grid has (2^L + 1)^3 vertices.
   hessian_rays: int = _f(65536, 'hessian')  # R: training rays in the Hessian pass.

@@ -68,7 +68,7 @@ def test_defaults_have_one_source():
 
 
 def test_config_comments_carry_no_measurements():
-  """Measured results live in experiments/results/README.md, not in gin comments."""
+  """Measured results live in experiments/results/<question>/README.md, not in gin comments."""
   for path in TOP_LEVEL + MODIFIERS:
     with open(path) as f:
       text = f.read()

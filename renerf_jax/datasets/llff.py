@@ -58,7 +58,7 @@ def bounds_warning(bounds, path):
   LLFF's own captures (fern, orchids, fortress here) have near bounds within 1.3x of each
   other and far / near around 4-6; the re-processed room and trex in ../shared have 4-5x
   and 22 (their near bounds are 3-12x smaller than the depths triangulated from the images,
-  experiments/results/README.md).
+  experiments/results/near_bounds_room_trex/README.md).
 
   Args:
     bounds: [N, 2] near/far bounds. path: the file they came from (named in the warning).
