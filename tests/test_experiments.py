@@ -37,8 +37,11 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   rows = t1['rows']
   assert [r['round'] for r in rows[:2]] == ['baseline', 'R1']
   eq = json.loads((out / 't1' / 'equal_time.json').read_text())
-  # Two rounds of 12 steps plus pseudo-view synthesis: more than 24 steps' worth of time.
-  assert eq['max_steps'] > 24 and rows[2]['round'] == f"{eq['max_steps']} steps"
+  # Two rounds of 12 steps plus pseudo-view synthesis: more than 24 steps' worth of time
+  # for each seed (by how much depends on the machine's load; the rounded median may be 24).
+  assert all(s > 24 for s in eq['per_seed_steps']) and len(eq['per_seed_steps']) == 2
+  assert eq['max_steps'] == round(float(np.median(eq['per_seed_steps'])))
+  assert rows[2]['round'] == f"{eq['max_steps']} steps"
   assert rows[0]['seeds'] == 2 and rows[0]['psnr_std'] > 0  # two different seeds
   assert (out / 't1.md').read_text().count('19.08') == 1  # the paper's baseline beside ours
   assert (out / 't1_time.png').stat().st_size > 0
