@@ -195,6 +195,12 @@ def test_early_termination_drops_the_saturating_gaussian():
   a = 0.98 * np.exp(-0.5 * 1e-4 * 0.5)  # pixel (16.5, 12.5) -> d = (0.5, 0.5)
   np.testing.assert_allclose(rgb[12, 16], [a, (1 - a) * a, 0.], rtol=1e-5)
   np.testing.assert_allclose(acc[12, 16], 1 - (1 - a)**2, rtol=1e-5)
+  # Padding ids (>= N) are skipped wherever they stand in a list, even mid-list.
+  gappy = jnp.tile(jnp.array([[0, 3, 3, 1, 2]]), (4, 1))
+  rgb2, _, acc2 = rasterize.rasterize(gappy, means2d, conics, colours, opac, depths, H, W,
+                                      jnp.zeros(3), chunk=2)
+  np.testing.assert_allclose(rgb2, rgb, atol=1e-7)
+  np.testing.assert_allclose(acc2, acc, atol=1e-7)
 
 
 # ----------------------------------------------------------------------------- projection

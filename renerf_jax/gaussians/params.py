@@ -78,7 +78,8 @@ def random_init(key, n, lo, hi, capacity=None, init_opacity=0.1, scale_factor=1.
     capacity: total slots (>= n, default n); slots n.. are inactive copies.
     init_opacity: initial opacity in (0, 1).
     scale_factor: multiplies the initial scale.
-    knn: 3DGS's nearest-neighbour scales instead of the box spacing.
+    knn: 3DGS's nearest-neighbour scales instead of the box spacing (n >= 2; a single
+      Gaussian keeps the box spacing).
 
   Returns:
     Gaussians with N = capacity.

@@ -11,9 +11,10 @@ NeRF renderer's `distance`, whose t is also the depth since its camera rays have
 
 As the CUDA rasterisers (3DGS, gsplat) do, the tile lists are walked in chunks of
 `chunk` Gaussians for all pixels of all tiles at once ([T, tile^2, chunk] arrays), in a
-`lax.while_loop` that stops when every pixel is done or every list is exhausted: a tile
-list may be as long as the number of Gaussians (no cap) and only the chunks that can
-still change a pixel cost anything. Within a chunk the transmittance is a cumulative
+`lax.while_loop` that stops when every pixel of the image is done or the longest list
+is exhausted: a tile list may be as long as the number of Gaussians (no cap). The stop
+is global (all tiles step together), so a step costs about T * P * ceil(longest list /
+chunk) alpha evaluations unless every pixel saturates first. Within a chunk the transmittance is a cumulative
 product, and the first Gaussian that would take it below 1e-4 ends the pixel.
 
 The gradient is a custom VJP, the reference rasteriser's backward pass: the chunks are
@@ -92,8 +93,8 @@ def _forward(tile_ids, means2d, conics, colours, opacities, depths, height, widt
   num_chunks = length // chunk
   means2d_p, conics_p, colours_p = _pad(means2d), _pad(conics), _pad(colours)
   opacities_p, depths_p = _pad(opacities), _pad(depths)
-  # Chunks past the longest list hold only padding: stop before them.
-  used = jnp.max(jnp.sum(tile_ids < n, axis=1))
+  # Chunks past the last real id of every list hold only padding: stop before them.
+  used = jnp.max(jnp.where(tile_ids < n, jnp.arange(1, length + 1), 0))
   last = -(-used // chunk)
   slot = jnp.arange(chunk, dtype=jnp.int32)
 
@@ -214,7 +215,7 @@ def rasterize(tile_ids, means2d, conics, colours, opacities, depths, height, wid
 
   Args:
     tile_ids: [T, L] int Gaussian ids per tile, front to back; ids >= N are padding
-      (after the real ids of each list). L may be anything up to N (no cap).
+      (skipped wherever they stand). L may be anything up to N (no cap).
     means2d: [N, 2] pixels. conics: [N, 3]. colours: [N, 3]. opacities: [N] in [0, 1].
     depths: [N] view depths.
     height, width, tile: static ints; T must equal tiles.tile_grid product.
