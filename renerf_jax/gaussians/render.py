@@ -61,13 +61,6 @@ def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, c
     (fraction of tiles with more than `cap` Gaussians), count [T] (Gaussians per tile),
     valid [N] and radius [N] (the projection's culling mask and pixel radii).
   """
-  with jax.default_matmul_precision('highest'):  # No TF32 on GPUs: pixel-exact geometry.
-    return _render(gaussians, c2w, focal, height, width, sh_degree, background, cap, near,
-                   tile, means2d_offset)
-
-
-def _render(gaussians, c2w, focal, height, width, sh_degree, background, cap, near, tile,
-            means2d_offset):
   dtype = gaussians.means.dtype
   background = (jnp.zeros(3, dtype) if background is None
                 else jnp.asarray(background, dtype))
