@@ -1,6 +1,6 @@
 """What the persistent compilation cache (renerf_jax/jit_cache.py) saves per train step.
 
-python benchmarks/bench_compile_cache.py --config experiments/configs/table_small.gin \
+python -m benchmarks.bench_compile_cache --config experiments/configs/table_small.gin \
   --gin_bindings "Config.data_dir='../shared/data/nerf_llff_data'"
 
 Each measurement runs in a fresh process: the cache off, the cache on in an empty
@@ -13,14 +13,11 @@ markdown table to benchmarks/results/compile_cache (or --out).
 """
 import argparse
 import json
-import os
 import shlex
 import subprocess
 import sys
 import tempfile
 import time
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def child(config_path, bindings, cache_dir):
@@ -53,8 +50,9 @@ def child(config_path, bindings, cache_dir):
 
 
 def run_child(args, cache_dir):
-  cmd = [sys.executable, os.path.abspath(__file__), '--child', '--config', args.config,
-         '--cache_dir', cache_dir] + [f'--gin_bindings={b}' for b in args.gin_bindings]
+  cmd = [sys.executable, '-m', 'benchmarks.bench_compile_cache', '--child',
+         '--config', args.config, '--cache_dir', cache_dir] + [
+             f'--gin_bindings={b}' for b in args.gin_bindings]
   out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
   return json.loads(out.strip().splitlines()[-1])
 
@@ -83,7 +81,7 @@ def main():
       ('process', 'process'), ('first_step_s', 'first step s'),
       ('new_seed_step_s', 'first step, new seed s'), ('steady_step_s', 'steady step s')],
       floatfmt={k: '.2f' for k in ('first_step_s', 'new_seed_step_s', 'steady_step_s')})
-  command = 'python ' + shlex.join(sys.argv)
+  command = 'python ' + shlex.join(['-m', 'benchmarks.bench_compile_cache'] + sys.argv[1:])
   text = (f'# Persistent compilation cache, train step of `{args.config}`\n\n'
           f'Each row is a fresh process (see the script).\n\n{table}\n\n'
           f'Command:\n\n    {command}\n')

@@ -4,7 +4,7 @@ Times a jitted value_and_grad of a squared-error loss of the field's raw outputs
 w.r.t. all field parameters, for R rays x S samples, repeating and keeping the best
 time (the CPU is shared). Prints one JSON object and a markdown table.
 
-  PYTHONPATH=. python benchmarks/bench_fields.py --rays 1024 --samples 64 --repeats 7
+  python -m benchmarks.bench_fields --rays 1024 --samples 64 --repeats 7
 """
 import argparse
 import json

@@ -1,7 +1,7 @@
 """Gaussian splatting's training step and render against the number of Gaussians and the
 image size, beside the grid NeRF's training step (issue 33).
 
-python benchmarks/bench_gaussians.py --out benchmarks/results/gaussians
+python -m benchmarks.bench_gaussians --out benchmarks/results/gaussians
 
 For each image size (fern's 504x378 downsampled by --downsample) and Gaussian count:
 seconds per training step (forward, backward, Adam; median of --repeats after warm-up),
@@ -21,10 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-# pylint: disable=g-import-not-at-top,wrong-import-position
-from bench_throughput import time_calls
+from benchmarks.bench_throughput import time_calls
 from renerf_jax import report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
@@ -116,7 +113,7 @@ def main():
                    'gaussians': n, 'train_s': train_s, 'render_s': render_s,
                    'cap_bound': bound, 'compile_s': compile_s})
       print(rows[-1], flush=True)
-  cmd = 'python benchmarks/bench_gaussians.py ' + ' '.join(sys.argv[1:])
+  cmd = 'python -m benchmarks.bench_gaussians ' + ' '.join(sys.argv[1:])
   report.write_json(args.out + '.json', {'rows': rows, 'command': cmd,
                                          'cpu_count': os.cpu_count()})
   table = report.markdown_table(rows, [

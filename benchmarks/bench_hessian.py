@@ -14,7 +14,7 @@ pass, alternating the two passes --repeats times and keeping the best of each (t
 is shared). Timings do not depend on the parameter values, so the field is freshly
 initialised. Writes <out>.json and <out>.md:
 
-  python benchmarks/bench_hessian.py --configs experiments/configs/table_converged2.gin \
+  python -m benchmarks.bench_hessian --configs experiments/configs/table_converged2.gin \
       gin_configs/llff3_10min.gin --rays 8883 16384 --out benchmarks/results/hessian_stop26
 """
 import argparse
@@ -30,9 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_throughput import time_calls  # pylint: disable=g-import-not-at-top
-from renerf_jax import laplace, model, report  # pylint: disable=g-import-not-at-top
+from benchmarks.bench_throughput import time_calls
+from renerf_jax import laplace, model, report
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.deformation import grid_size, trilinear_corners
@@ -223,7 +222,7 @@ def main(argv=None):
                              args.repeats))
     print(json.dumps(rows[-1]), flush=True)
   command = 'python ' + shlex.join(
-      ['benchmarks/bench_hessian.py'] + list(sys.argv[1:] if argv is None else argv))
+      ['-m', 'benchmarks.bench_hessian'] + list(sys.argv[1:] if argv is None else argv))
   report.write_json(args.out + '.json', {'rows': rows, 'command': command})
   report.write_markdown(args.out + '.md', markdown(rows, command))
   return rows

@@ -1,6 +1,6 @@
 """Where a train step's time goes: its parts timed alone, with XLA's FLOP and byte counts.
 
-python benchmarks/bench_step_breakdown.py --configs experiments/configs/table_converged.gin \
+python -m benchmarks.bench_step_breakdown --configs experiments/configs/table_converged.gin \
     gin_configs/llff3_fast.gin
 
 For each config, on the same batch shapes as training.train_step (batch rays + random-
@@ -35,9 +35,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from bench_throughput import time_calls, xla_cost  # pylint: disable=g-import-not-at-top
-from renerf_jax import mip, model, regularizers, report, training  # pylint: disable=g-import-not-at-top
+from benchmarks.bench_throughput import time_calls, xla_cost
+from renerf_jax import mip, model, regularizers, report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.fields import make_field
@@ -160,7 +159,7 @@ def main(argv=None):
           'seconds': '.4f', 'share_of_step': '.0%', 'gflop': '.2f', 'gb': '.3f',
           'flop_per_byte': '.2f', 'gflop_per_s': '.1f', 'gb_per_s': '.1f',
           'step_vs_first': '.2f'})
-  command = 'python ' + shlex.join(sys.argv)
+  command = 'python ' + shlex.join(['-m', 'benchmarks.bench_step_breakdown'] + sys.argv[1:])
   text = (f'{table}\n\nParts overlap (render+grad contains encode and mlps); "of step" is '
           f'each part\'s time over the whole step\'s. Device: {jax.devices()[0]}, '
           f'{os.cpu_count()} CPUs.\n\nCommand:\n\n    {command}\n')

@@ -1,6 +1,6 @@
 """Rays/s of the train step, the render step and the Hessian pass, per config.
 
-python benchmarks/bench_throughput.py --configs gin_configs/llff3_cpu.gin \
+python -m benchmarks.bench_throughput --configs gin_configs/llff3_cpu.gin \
     gin_configs/llff3_fast.gin gin_configs/llff3.gin
 
 For each config and stage, on the configured scene with freshly initialised parameters
@@ -29,8 +29,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-# pylint: disable=g-import-not-at-top
 from benchmarks.bench_train_step import matmul_gflops
 from renerf_jax import deformation, laplace, model, report, training
 from renerf_jax.configs import load_config
@@ -196,7 +194,7 @@ def main(argv=None):
   add_speedups(rows)
   for row in rows:
     row['flop_efficiency'] = row['achieved_gflops'] / roof
-  command = 'python ' + shlex.join(sys.argv)
+  command = 'python ' + shlex.join(['-m', 'benchmarks.bench_throughput'] + sys.argv[1:])
   os.makedirs(os.path.dirname(args.out) or '.', exist_ok=True)
   report.write_json(args.out + '.json', {'matmul_gflops': roof,
                                          'device': str(jax.devices()[0]),

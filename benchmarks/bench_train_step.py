@@ -1,6 +1,6 @@
 """Train-step throughput of configs, next to this CPU's matmul roof.
 
-python benchmarks/bench_train_step.py --configs gin_configs/llff3_cpu.gin gin_configs/llff3.gin
+python -m benchmarks.bench_train_step --configs gin_configs/llff3_cpu.gin gin_configs/llff3.gin
 
 For each config: compile time, seconds per step (median of --steps after one warm-up),
 rays/s (batch rays + random-pose patch rays), XLA's FLOP count of the compiled step and the
@@ -16,8 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from renerf_jax import model, report, training  # pylint: disable=g-import-not-at-top
+from renerf_jax import model, report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import make_pools
@@ -80,7 +79,9 @@ def main():
     rows.append(row)
     print(row, flush=True)
   report.write_json(args.out + '.json', {'matmul_gflops': roof, 'device': str(jax.devices()[0]),
-                                         'rows': rows, 'command': ' '.join(sys.argv)})
+                                         'rows': rows,
+                                         'command': 'python -m benchmarks.bench_train_step '
+                                                    + ' '.join(sys.argv[1:])})
   text = write_table(rows, roof, args.out)
   print(text)
 

@@ -2,7 +2,7 @@
 
 Example (issue 3: mip-NeRF vs RegNeRF vs FreeNeRF-regularised on fern, CPU config):
 
-  python experiments/compare_equal_time.py --name fern_regularizers \
+  python -m experiments.compare_equal_time --name fern_regularizers \
     --base gin_configs/llff3_cpu.gin --budget_s 600 \
     --gin_bindings="Config.data_dir='../shared/data/nerf_llff_data'" \
     --method "mip-NeRF=gin_configs/modifiers/mipnerf.gin" --method "RegNeRF=" \
@@ -24,7 +24,7 @@ method its own seeds (e.g. a reference config on one seed). Writes <out>/<name>.
 Time to quality (issue 21), 10 minutes on full-resolution fern, old against new config,
 with idle-CPU rates from bench_throughput:
 
-  python experiments/compare_equal_time.py --name fern_10min --base gin_configs/llff3_fast.gin \
+  python -m experiments.compare_equal_time --name fern_10min --base gin_configs/llff3_fast.gin \
     --budget_s 600 --method 'llff3_fast=' --method 'llff3_10min=gin_configs/llff3_10min.gin' \
     --sec_per_step llff3_10min=0.192 --sec_per_step llff3_fast=0.709 \
     --seeds 0 1 2 --seeds_of llff3_fast=0
@@ -32,20 +32,18 @@ with idle-CPU rates from bench_throughput:
 import argparse
 import dataclasses
 import os
-import shlex
 import sys
 import time
 
 import jax
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from renerf_jax import jit_cache, report, training  # pylint: disable=g-import-not-at-top
+from experiments import tables
+from renerf_jax import jit_cache, report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import make_pools
 from renerf_jax.resume import run_rounds
-import tables  # pylint: disable=g-import-not-at-top,g-bad-import-order
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 
@@ -190,7 +188,7 @@ def main():
   cols = [('method', 'method'), ('seeds', 'seeds'), ('steps', 'steps'),
           ('sps', 's / step'), ('seconds', 'train s (logged)')] + [
               (k, k.upper().replace('_', '-')) for k in METRICS]
-  cmd = 'python ' + shlex.join(sys.argv)
+  cmd = tables.command_line('experiments.compare_equal_time')
   note = ('\n\n"s / step (given)": an idle-CPU rate passed with --sec_per_step; that '
           'method\'s steps fill the budget at that rate, its curve\'s time axis is step x '
           'that rate, and its logged train seconds may be inflated by other jobs.'

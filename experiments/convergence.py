@@ -13,7 +13,7 @@ Invocations can be split by scene or seed; each writes the table of every finish
 it finds. The converged-regime config on 2 CPU cores (experiments/configs/
 table_converged.gin), fern, seed 0 (experiments/results/converged_baseline_llff/converged8.md):
 
-  python experiments/convergence.py --name converged8 \
+  python -m experiments.convergence --name converged8 \
     --config experiments/configs/table_converged.gin --scenes fern \
     --seeds 0 --steps 250 500 1000 2000
 
@@ -22,13 +22,10 @@ training seconds, one column per scene, mean +- std over seeds).
 """
 import argparse
 import os
-import shlex
 import sys
 
-import numpy as np
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from renerf_jax import cli, jit_cache, report, resume, rundir  # pylint: disable=g-import-not-at-top
+from experiments.tables import command_line, mean_std
+from renerf_jax import cli, jit_cache, report, resume, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.progress import progress_bar
@@ -64,11 +61,6 @@ def finished(root, scene, steps, seed):
   if not rundir.is_done(rdir):
     return None
   return report.read_json(os.path.join(rdir, 'result.json'))
-
-
-def mean_std(vals):
-  vals = np.asarray(vals, np.float64)
-  return float(vals.mean()), float(vals.std(ddof=1)) if len(vals) > 1 else 0.
 
 
 def summarize(root, scenes, seeds, steps):
@@ -157,7 +149,8 @@ def main(argv=None):
   bar.close()
   rows = summarize(root, args.scenes, args.seeds, steps)
   # The command that reproduces the table (the runs are reused, or trained when missing).
-  command = 'python ' + shlex.join([a for a in sys.argv if a != '--no-train'])
+  command = command_line('experiments.convergence',
+                         [a for a in sys.argv[1:] if a != '--no-train'])
   report.write_json(os.path.join(args.out, args.name + '.json'),
                     {'name': args.name, 'config': args.config, 'bindings': args.gin_bindings,
                      'rows': rows, 'max_gain': MAX_GAIN, 'command': command})

@@ -5,7 +5,7 @@ Run once, outside CI, in an environment that has a CPU-capable `torch`, `gsplat`
 
   python -m venv /tmp/gs && /tmp/gs/bin/pip install torch gsplat==1.4.0 nerfacc ninja
   /tmp/gs/bin/pip install -e .
-  /tmp/gs/bin/python experiments/gsplat_check.py \
+  /tmp/gs/bin/python -m experiments.gsplat_check \
     --out experiments/results/gaussians_gsplat_check
 
 On the same random Gaussians (some behind the camera, on the near plane, huge, tiny,
@@ -34,7 +34,6 @@ import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # pylint: disable=g-import-not-at-top
 
 
@@ -144,7 +143,7 @@ def main(argv=None):
     rows.append(dict(seed=seed, **row))
     print(json.dumps(rows[-1]))
   os.makedirs(args.out, exist_ok=True)
-  command = 'python ' + ' '.join(['experiments/gsplat_check.py'] + list(
+  command = 'python ' + ' '.join(['-m', 'experiments.gsplat_check'] + list(
       argv if argv is not None else sys.argv[1:]))
   result = {'rows': rows, 'gsplat': gsplat.__version__, 'torch': torch.__version__,
             'command': command}

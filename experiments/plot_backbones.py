@@ -1,6 +1,6 @@
 """Error against run time of finished baseline runs of several backbones / configs.
 
-  python experiments/plot_backbones.py --name fern_backbones \
+  python -m experiments.plot_backbones --name fern_backbones \
       --run 'MLP (llff3_cpu.gin)=experiments/results/fern_regularizers/RegNeRF/seed*' \
       --run 'grid (llff3_fast.gin)=experiments/results/fern_fast_baseline/Re-Nerfing/seed*' \
       --sec_per_step 'MLP (llff3_cpu.gin)=0.342' --sec_per_step 'grid (llff3_fast.gin)=0.35'
@@ -16,14 +16,11 @@ jobs (their logged seconds are then inflated by an unknown factor). Writes <name
 import argparse
 import glob
 import os
-import shlex
-import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from renerf_jax import report  # pylint: disable=g-import-not-at-top
-import tables  # pylint: disable=g-import-not-at-top,g-bad-import-order
+from experiments import tables
+from renerf_jax import report
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 
@@ -51,8 +48,8 @@ def main(argv=None):
   unknown = set(rates) - set(runs)
   if unknown:
     raise SystemExit(f'error: --sec_per_step for unknown label(s) {sorted(unknown)}')
-  curves, rows, results = {}, [], {'name': args.name, 'methods': [],
-                                   'command': 'python ' + shlex.join(sys.argv)}
+  command = tables.command_line('experiments.plot_backbones', argv)
+  curves, rows, results = {}, [], {'name': args.name, 'methods': [], 'command': command}
   for label, pattern in runs.items():
     dirs = sorted(glob.glob(pattern))
     if not dirs:

@@ -5,7 +5,7 @@ neighbour) and back, poses interpolated as the pseudo-views are (lerp + SLERP). 
 is <round A> | <round B>, rendered at 1/--downscale of the training resolution. Writes a
 GIF (imageio) and a PNG of the middle frame. Fern, after renerf_rounds.py:
 
-  python experiments/render_video.py \
+  python -m experiments.render_video \
     --run_dir experiments/results/fern_rounds_fast/Re-Nerfing/seed0 \
     --config gin_configs/llff3_fast.gin gin_configs/renerf.gin \
     --data_dir ../shared/data/nerf_llff_data \
@@ -13,14 +13,11 @@ GIF (imageio) and a PNG of the middle frame. Fern, after renerf_rounds.py:
 """
 import argparse
 import os
-import sys
 
 import imageio.v3 as iio
 import numpy as np
 from flax import serialization
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-# pylint: disable=g-import-not-at-top
 from experiments.tables import bindings_of
 from renerf_jax import poses as pose_lib
 from renerf_jax import renerf, report, resume, rundir

@@ -11,7 +11,7 @@ and the Laplace masks on (the full method),
 experiments/results/renerf_rounds_fern/fern_rounds_tiny.md, in one invocation of 53 min (rounds
 26.6 min, equal-time control 26.5 min; a masked round 2.4 min):
 
-  python experiments/renerf_rounds.py --name fern_rounds_tiny \
+  python -m experiments.renerf_rounds --name fern_rounds_tiny \
     --config experiments/configs/table_tiny.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 --variant 'Re-Nerfing (masks)=Config.use_masks=True'
 
@@ -21,7 +21,7 @@ experiments/results/renerf_rounds_fern/fern_rounds_small.md, which takes longer 
 invocation of 17 min, killed and resumed by a second of 32 min), the equal-time control
 39 min more (a third invocation, without --no_equal_time: it reuses the finished rounds):
 
-  python experiments/renerf_rounds.py --name fern_rounds_small \
+  python -m experiments.renerf_rounds --name fern_rounds_small \
     --config experiments/configs/table_small.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 \
     --variant 'Re-Nerfing (masks)=Config.use_masks=True' [--no_equal_time]
@@ -32,18 +32,14 @@ it was before its lr change (650 steps with annealing, lr 1e-2 -> 1e-3) and took
 reproduce it, restore the configs of commit d6dd94a (`git checkout d6dd94a --
 gin_configs`) and run
 
-  python experiments/renerf_rounds.py --name fern_rounds_fast \
+  python -m experiments.renerf_rounds --name fern_rounds_fast \
     --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 --gin_bindings "Config.lr_final = 1e-3"
 
 Paper scale: --config gin_configs/llff3.gin gin_configs/renerf.gin. See
 experiments/tables.py for the run directories, baseline sharing and the equal-time rule.
 """
-import os
-import sys
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import tables  # pylint: disable=g-import-not-at-top
+from experiments import tables
 
 # Re-Nerfing paper, LLFF 3 views, mean over the 8 scenes, RegNeRF base (PSNR, SSIM, LPIPS).
 PAPER_LLFF3 = {('*', 'baseline'): (19.08, .685, .148), ('*', 'R1'): (19.35, .713, .133),

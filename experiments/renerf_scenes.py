@@ -18,11 +18,11 @@ experiments/results/renerf_r1_converged_llff/scenes_conv2.md), and its attributi
 seed 0 (further --variant rows, the mix and the factors, as in
 experiments/results/renerf_attribution_converged_llff/README.md):
 
-  python experiments/renerf_scenes.py --name scenes_conv2 \
+  python -m experiments.renerf_scenes --name scenes_conv2 \
     --config experiments/configs/table_converged2.gin \
     --scenes fern orchids room trex fortress --seeds 0 1 2 \
     --reuse experiments/results/conv2
-  python experiments/renerf_scenes.py --name scenes_conv2 --table scenes_conv2_attribution \
+  python -m experiments.renerf_scenes --name scenes_conv2 --table scenes_conv2_attribution \
     --config experiments/configs/table_converged2.gin --scenes fern trex --seeds 0 --no_2x \
     --variant 'K 0.12=Config.pseudo_until_frac = 0.12' \
     --variant 'K 0.5=Config.pseudo_until_frac = 0.5'
@@ -31,7 +31,7 @@ Tables made separately (e.g. one per scene, in parallel) are put into one with -
 which reads their .json rows and trains nothing
 (experiments/results/renerf_r1_converged_llff/scenes_conv3.md):
 
-  python experiments/renerf_scenes.py --name scenes_conv3 --merge \
+  python -m experiments.renerf_scenes --name scenes_conv3 --merge \
     experiments/results/renerf_r1_converged_llff/scenes_conv3_{fern,orchids,room,trex,fortress}.json
 
 Writes <out>/<name>.json, <name>.md and <name>.png (paired deltas per scene; --table
@@ -41,13 +41,11 @@ import argparse
 import dataclasses
 import os
 import shlex
-import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import tables  # pylint: disable=g-import-not-at-top
-from renerf_jax import jit_cache, report  # pylint: disable=g-import-not-at-top
+from experiments import tables
+from renerf_jax import jit_cache, report
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 
@@ -104,6 +102,13 @@ def parser():
   return p
 
 
+def command_args(command):
+  """The arguments of a table's recorded command: `python -m experiments.renerf_scenes ARGS`
+  or, in tables made before it ran as a module, `python experiments/renerf_scenes.py ARGS`."""
+  words = shlex.split(command)
+  return words[3:] if words[1:2] == ['-m'] else words[2:]
+
+
 def merged_rows(paths):
   """Rows of finished tables, merged: ({scene: {label: {seed: metrics}}}, seeds, their
   commands, (config, gin_bindings, data_dir), backbone). Raises SystemExit with one line
@@ -113,7 +118,7 @@ def merged_rows(paths):
   for path in paths:
     try:
       table = report.read_json(path)
-      src = parser().parse_args(shlex.split(table['command'])[2:])
+      src = parser().parse_args(command_args(table['command']))
       table_rows = table['rows']
     except (OSError, ValueError, KeyError, SystemExit) as e:
       raise SystemExit(f'--merge: {path} is not a renerf_scenes table ({e})') from None
@@ -347,8 +352,7 @@ def plot(summary, scenes, path):
 def main(argv=None):
   p = parser()
   args = p.parse_args(argv)
-  command = 'python ' + shlex.join(
-      sys.argv if argv is None else ['experiments/renerf_scenes.py'] + list(argv))
+  command = tables.command_line('experiments.renerf_scenes', argv)
   table = args.table or args.name
   if args.merge:
     all_rows, seeds, sources, (config, _, _), backbone = merged_rows(args.merge)

@@ -8,7 +8,7 @@ what the runs wrote and the photos from the scene; trains nothing. The paper-sca
 Gaussians check (experiments/device_gaussians_paper_scale.sh on a GPU, run directories
 copied back):
 
-  python experiments/run_summary.py --runs /tmp/gpu/fern /tmp/gpu/orchids \
+  python -m experiments.run_summary --runs /tmp/gpu/fern /tmp/gpu/orchids \
     --data_dir ../shared/data/nerf_llff_data \
     --out experiments/results/gaussians_paper_scale/baseline
 """
@@ -19,8 +19,6 @@ import sys
 import imageio.v3 as iio
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-# pylint: disable=g-import-not-at-top
 from renerf_jax import report, resume
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
@@ -71,7 +69,7 @@ def main():
   mean = {'run': 'mean'}
   for k in ('psnr', 'ssim', 'lpips_alex', 'best_psnr', 'train_s', 'steps_per_s'):
     mean[k] = float(np.mean([r[k] for r in rows]))
-  cmd = 'python experiments/run_summary.py ' + ' '.join(sys.argv[1:])
+  cmd = 'python -m experiments.run_summary ' + ' '.join(sys.argv[1:])
   os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
   report.write_json(args.out + '.json', {'rows': rows, 'mean': mean, 'curves': curves,
                                          'command': cmd})

@@ -9,7 +9,7 @@ Fern on the 2-core CPU with the hour-budget table config (table_tiny.gin: 126x94
 512 rays a step), baselines and '+ masks' from its rounds table: 8.9 min for three
 seeds, experiments/results/masks_ablation_fern/fern_masks_tiny.md:
 
-  python experiments/table_masks.py --name fern_masks_tiny \
+  python -m experiments.table_masks --name fern_masks_tiny \
     --config experiments/configs/table_tiny.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 \
     --baseline_from 'experiments/results/fern_rounds_tiny/Re-Nerfing (masks)/seed{seed}'
@@ -20,7 +20,7 @@ the '+ masks' rounds taken from the rounds table
 table's '+ masks' and is copied, not trained again): 21.5 min for three seeds,
 experiments/results/masks_ablation_fern/fern_masks_small.md:
 
-  python experiments/table_masks.py --name fern_masks_small \
+  python -m experiments.table_masks --name fern_masks_small \
     --config experiments/configs/table_small.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 \
     --baseline_from 'experiments/results/fern_rounds_small/Re-Nerfing (masks)/seed{seed}'
@@ -33,7 +33,7 @@ experiments/results/masks_ablation_fern/fern_masks_fast.md was made with the 650
 `git checkout d6dd94a -- gin_configs` to resume or reproduce), the baselines taken from
 the baseline table made with the same config:
 
-  python experiments/table_masks.py --name fern_masks_fast \
+  python -m experiments.table_masks --name fern_masks_fast \
     --config gin_configs/llff3_fast_renerf.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 \
     --baseline_from 'experiments/results/fern_fast_baseline/Re-Nerfing/seed{seed}'
@@ -44,11 +44,7 @@ Its rounds took 443-482 s each (pseudo-views and training; the '+ masks' Hessian
 The paper's numbers for this table are not in the script: the project has only its
 Table 1 numbers (renerf_rounds.py).
 """
-import os
-import sys
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import tables  # pylint: disable=g-import-not-at-top
+from experiments import tables
 
 VARIANTS = ["augmented views=Config.pseudo_schedule='all'",
             'stop aug. views=',

@@ -15,7 +15,7 @@ allocate memory": every run's compiled steps were kept and their memory mappings
 Linux's 65530, fixed since by jit_cache.release_compiled between runs); the same command
 resumed with the fix and finished the last four rounds in 6.9 min:
 
-  python experiments/table_view_selection.py --name fern_views_tiny \
+  python -m experiments.table_view_selection --name fern_views_tiny \
     --config experiments/configs/table_tiny.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2 \
     --baseline_from 'experiments/results/fern_rounds_tiny/Re-Nerfing (masks)/seed{seed}'
@@ -32,18 +32,18 @@ that the table shows one baseline row:
 
   C="--name fern_views_small --config experiments/configs/table_small.gin \
      --data_dir ../shared/data/nerf_llff_data --scene fern --seeds 0 1 2"
-  python experiments/table_view_selection.py $C \
+  python -m experiments.table_view_selection $C \
     --baseline_from 'experiments/results/fern_rounds_small/Re-Nerfing (masks)/seed{seed}' \
     --variant "7x=Config.interp_factors='7x'" --variant "5x=Config.interp_factors='5x'" \
     --variant "3x_b=Config.interp_factors='3x_b'" \
     --variant "3x_c=Config.interp_factors='3x_c'" --variant "11x=Config.interp_factors='11x'"
-  python experiments/table_view_selection.py $C \
+  python -m experiments.table_view_selection $C \
     --baseline_from 'experiments/results/fern_views_small/7x/seed{seed}' \
     --variant "2x=Config.interp_factors='2x'" --variant "3x=Config.interp_factors='3x'" \
     --variant "4x=Config.interp_factors='4x'" \
     --variant "3 test poses=Config.pseudo_targets='test'" \
     --variant "3 random poses=Config.pseudo_targets='random';Config.pseudo_n_random=3"
-  python experiments/table_view_selection.py $C \
+  python -m experiments.table_view_selection $C \
     --baseline_from 'experiments/results/fern_rounds_small/Re-Nerfing (masks)/seed{seed}'
 
 The last two variants have as many pseudo-views as the scene has test views (fern: 3,
@@ -52,12 +52,8 @@ every 8th of its 20 images).
 The paper's numbers for this table are not in the script: the project has only its
 Table 1 numbers (renerf_rounds.py).
 """
-import os
-import sys
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import tables  # pylint: disable=g-import-not-at-top
-from renerf_jax.datasets import load_scene  # pylint: disable=g-import-not-at-top
+from experiments import tables
+from renerf_jax.datasets import load_scene
 
 FACTORS = ('7x', '2x', '3x', '3x_b', '3x_c', '4x', '5x', '11x')
 

@@ -11,7 +11,7 @@ the fast grid backbone at half resolution, 400 steps): measured 45 min for three
 (12.6 min for seed 0 alone on an idle CPU; seeds 1 and 2 shared the CPU with the test
 suite for part of their time), experiments/results/why_ablation_fern/fern_why_small.md:
 
-  python experiments/table_why.py --name fern_why_small \
+  python -m experiments.table_why --name fern_why_small \
     --config experiments/configs/table_small.gin --data_dir ../shared/data/nerf_llff_data \
     --scene fern --seeds 0 1 2
 
@@ -22,11 +22,7 @@ trained, 4x the pixels rendered; estimated, not measured).
 The paper's numbers for this table are not in the script: the project has only its
 Table 1 numbers (renerf_rounds.py).
 """
-import os
-import sys
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import tables  # pylint: disable=g-import-not-at-top
+from experiments import tables
 
 
 def variants(max_steps):

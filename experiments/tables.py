@@ -37,12 +37,10 @@ import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from renerf_jax import cli, jit_cache, report, resume, rundir  # pylint: disable=g-import-not-at-top
+from experiments import sharing
+from renerf_jax import cli, jit_cache, report, resume, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-import sharing  # pylint: disable=g-import-not-at-top,g-bad-import-order
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 NAMES = {'psnr': 'PSNR', 'ssim': 'SSIM', 'lpips_alex': 'LPIPS-alex', 'lpips_vgg': 'LPIPS-vgg'}
@@ -85,6 +83,23 @@ def bindings_of(args):
 
 def base_config(args):
   return load_config(args.config, bindings_of(args))
+
+
+def command_line(module=None, argv=None):
+  """The shell line that ran this program, as a table records it: `python -m MODULE ARGS`.
+
+  Args:
+    module: the script as a module (e.g. 'experiments.renerf_scenes'); default: the module
+      that runs as __main__ (python -m), or the script's path if it was run as a file.
+    argv: its arguments; default: this process's (sys.argv[1:]).
+  """
+  args = list(sys.argv[1:] if argv is None else argv)
+  if module is None:
+    spec = getattr(sys.modules['__main__'], '__spec__', None)
+    if spec is None:  # run as a file: python path/to/script.py
+      return 'python ' + shlex.join(sys.argv[:1] + args)
+    module = spec.name
+  return 'python ' + shlex.join(['-m', module] + args)
 
 
 def mean_std(vals):
@@ -271,7 +286,7 @@ def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
   bindings = bindings_of(args)
   root = os.path.join(args.out, args.name)
   results = {'name': args.name, 'config': ' '.join(args.config), 'bindings': bindings,
-             'seeds': args.seeds, 'variants': [], 'command': 'python ' + shlex.join(sys.argv)}
+             'seeds': args.seeds, 'variants': [], 'command': command_line()}
   rows, curves, shared_rows, summaries, copied_rounds = [], {}, set(), {}, {}
   first_runs = None
   for vi, spec in enumerate(variants):

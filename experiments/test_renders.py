@@ -6,20 +6,17 @@ experiments/renerf_scenes.py (<runs>/<scene>/<row>/seed<k>) and the photos from 
 scene; trains and renders nothing. One row per scene, each image titled with its PSNR.
 The Gaussians table (experiments/results/gaussians_llff):
 
-  python experiments/test_renders.py --runs experiments/results/gaussians_llff/runs \
+  python -m experiments.test_renders --runs experiments/results/gaussians_llff/runs \
     --config experiments/configs/table_gaussians.gin \
     --scenes fern orchids room trex fortress --seed 0 \
     --out experiments/results/gaussians_llff/test_renders_seed0.png
 """
 import argparse
 import os
-import sys
 
 import imageio.v3 as iio
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-# pylint: disable=g-import-not-at-top
 from renerf_jax import report, resume, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene

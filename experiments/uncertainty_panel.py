@@ -8,7 +8,7 @@ with the timings and the Hessian pass's share of the round's wall time (the Hess
 over the pseudo-view synthesis plus the next round's training, as measured in the run).
 Fern, after renerf_rounds.py:
 
-  python experiments/uncertainty_panel.py \
+  python -m experiments.uncertainty_panel \
     --run_dir experiments/results/fern_rounds_fast/Re-Nerfing/seed0 \
     --config gin_configs/llff3_fast.gin gin_configs/renerf.gin \
     --data_dir ../shared/data/nerf_llff_data \
@@ -21,8 +21,6 @@ import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-# pylint: disable=g-import-not-at-top
 from experiments.render_video import load_params, run_config, run_parser
 from renerf_jax import report, resume
 from renerf_jax.datasets import load_scene
@@ -58,7 +56,7 @@ def main(argv=None):
   report.save_image_png(args.out + '.png', panel)
   out = dict(timing, views=args.views, run_dir=args.run_dir, round=args.round,
              hessian_rays=config.hessian_rays, deform_log2_res=config.deform_log2_res,
-             command='python ' + ' '.join(sys.argv))
+             command='python -m experiments.uncertainty_panel ' + ' '.join(sys.argv[1:]))
   nxt = os.path.join(resume.round_dir(args.run_dir, args.round + 1), 'result.json')
   if os.path.isfile(nxt):
     round_s = report.read_json(nxt)['metrics']['round_seconds']

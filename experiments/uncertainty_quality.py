@@ -18,21 +18,19 @@ curves of all variants, the oracle and random) and <out>/<name>_<scene>_panel.pn
 (pseudo-view | U | masked view for the best variant and for 'ours'; test view | U |
 error). Six scenes, two seeds, the hour-budget config:
 
-  python experiments/uncertainty_quality.py --name uq_tiny \
+  python -m experiments.uncertainty_quality --name uq_tiny \
     --scenes procedural fern orchids room trex fortress --seeds 0 1
 """
 import argparse
 import dataclasses
 import json
 import os
-import shlex
 import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-# pylint: disable=g-import-not-at-top
+from experiments.tables import command_line, mean_std
 from renerf_jax import cli, contraction, jit_cache, report, resume, rundir
 from renerf_jax import uncertainty_quality as uq
 from renerf_jax import uncertainty_signals as us
@@ -142,11 +140,6 @@ def run_one(args, root, scene_name, seed):
   report.write_json(qpath, q)  # Last: marks the run's signals as complete.
   jit_cache.release_compiled()
   return q
-
-
-def mean_std(vals):
-  vals = np.asarray(vals, np.float64)
-  return float(np.mean(vals)), float(np.std(vals, ddof=1)) if len(vals) > 1 else 0.
 
 
 def summarize(runs):
@@ -295,7 +288,7 @@ def main(argv=None):
   bar.close()
   rows, means, best, targets = summarize(runs)
   keep_frac = runs[0]['keep_frac']
-  command = 'python ' + shlex.join(sys.argv)
+  command = command_line('experiments.uncertainty_quality', argv)
   log = os.path.join(root, 'invocations.jsonl')
   rundir.append_jsonl(log, {'command': command, 'wall_seconds': time.perf_counter() - t0})
   invocations = rundir.read_jsonl(log)

@@ -14,8 +14,7 @@ QUICKSTART = [
      'download): train B on 3 views, render pseudo-views between the training cameras, '
      "estimate B's Laplace uncertainty, mask uncertain pixels, train D from scratch, and "
      'plot test PSNR against run time. In Colab, first run `!pip install -e .` in a clone.'),
-    ('code', '''import os, sys, tempfile
-sys.path.insert(0, os.path.abspath('..'))  # run from notebooks/ without installing
+    ('code', '''import os, tempfile
 import numpy as np
 import matplotlib.pyplot as plt
 from renerf_jax.configs import load_config
@@ -65,8 +64,7 @@ BYO = [
     ('md', '# Bring your own LLFF scene\n\nPoint `DATA_DIR` at a folder holding `<scene>/'
      'poses_bounds.npy` and `<scene>/images_8/` (the LLFF layout; make them with COLMAP and '
      "LLFF's imgs2poses.py), then train the CPU configuration and evaluate it."),
-    ('code', '''import os, sys, tempfile
-sys.path.insert(0, os.path.abspath('..'))
+    ('code', '''import os, tempfile
 import matplotlib.pyplot as plt
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene

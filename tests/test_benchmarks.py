@@ -1,9 +1,7 @@
 """Tests of the benchmark scripts' bookkeeping (not of any timing)."""
 import os
-import sys
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from benchmarks.bench_throughput import add_speedups  # pylint: disable=g-import-not-at-top
+from benchmarks.bench_throughput import add_speedups
 
 
 def test_speedups_are_against_the_first_config_of_the_same_stage():

@@ -20,8 +20,8 @@ TINY = ['Config.procedural_size = (32, 40)', 'Config.max_steps = 12',
         "Config.interp_factors = '2x'"]
 
 
-def _run(script, out, *extra):
-  cmd = ([sys.executable, f'experiments/{script}', '--config', 'gin_configs/demo.gin',
+def _run(module, out, *extra):
+  cmd = ([sys.executable, '-m', f'experiments.{module}', '--config', 'gin_configs/demo.gin',
           '--out', str(out), '--seeds', '0', '1'] + [f'--gin_bindings={b}' for b in TINY]
          + list(extra))
   res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
@@ -32,8 +32,11 @@ def _run(script, out, *extra):
 
 def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_path):
   out = tmp_path / 'results'
-  _run('renerf_rounds.py', out, '--name', 't1', '--rounds', '1')
+  _run('renerf_rounds', out, '--name', 't1', '--rounds', '1')
   t1 = json.loads((out / 't1.json').read_text())
+  # The command recorded is the one that ran: the script as a module (python -m).
+  assert t1['command'].startswith(
+      'python -m experiments.renerf_rounds --config gin_configs/demo.gin ')
   rows = t1['rows']
   assert [r['round'] for r in rows[:2]] == ['baseline', 'R1']
   eq = json.loads((out / 't1' / 'equal_time.json').read_text())
@@ -50,7 +53,7 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
 
   # A masks-style ablation reusing t1's baselines: no baseline is trained again, and every
   # variant's round_0 is a bit-for-bit copy.
-  stdout = _run('table_masks.py', out, '--name', 't4',
+  stdout = _run('table_masks', out, '--name', 't4',
                 '--baseline_from', str(out / 't1' / 'Re-Nerfing' / 'seed{seed}'),
                 '--gin_bindings=Config.deform_log2_res = 2',
                 '--gin_bindings=Config.hessian_rays = 256')
@@ -77,7 +80,7 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   assert '| + masks | R1 |' in stdout
   # The camera-path video of the baseline against the last round.
   gif = out / 'video.gif'
-  cmd = [sys.executable, 'experiments/render_video.py', '--run_dir',
+  cmd = [sys.executable, '-m', 'experiments.render_video', '--run_dir',
          str(out / 't1' / 'Re-Nerfing' / 'seed0'), '--config', 'gin_configs/demo.gin',
          '--frames', '4', '--out', str(gif)] + [f'--gin_bindings={b}' for b in TINY]
   res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300,
@@ -89,7 +92,7 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   # Uncertainty masks of the baseline's pseudo-views: panel PNG and Hessian share.
   run0 = out / 't1' / 'Re-Nerfing' / 'seed0'
   before = sorted(str(f) for f in run0.rglob('*'))
-  cmd = [sys.executable, 'experiments/uncertainty_panel.py', '--run_dir', str(run0),
+  cmd = [sys.executable, '-m', 'experiments.uncertainty_panel', '--run_dir', str(run0),
          '--config', 'gin_configs/demo.gin', '--work_dir', str(tmp_path / 'masks'),
          '--views', '0', '1', '--out', str(out / 'unc')] + [
              f'--gin_bindings={b}' for b in TINY + ['Config.deform_log2_res = 2',
@@ -105,7 +108,7 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   assert sorted(str(f) for f in run0.rglob('*')) == before  # the run is not written to
   # Error against time of finished baselines (two 'backbones': the same runs here).
   runs = str(out / 't1' / 'Re-Nerfing' / 'seed*')
-  cmd = [sys.executable, 'experiments/plot_backbones.py', '--name', 'bb', '--out', str(out),
+  cmd = [sys.executable, '-m', 'experiments.plot_backbones', '--name', 'bb', '--out', str(out),
          '--run', f'A={runs}', '--run', f'B={runs}', '--sec_per_step', 'A=0.5']
   res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120,
                        check=False)
@@ -124,8 +127,7 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
 
 
 def test_metric_curves_follow_each_variant_over_its_rounds():
-  sys.path.insert(0, str(REPO / 'experiments'))
-  import tables  # pylint: disable=g-import-not-at-top
+  from experiments import tables  # pylint: disable=g-import-not-at-top
   rows = lambda label, pts: [dict(variant=label, cumulative_seconds=t, psnr=p, psnr_std=.3,
                                   ssim=p / 40, lpips_alex=1 - p / 40) for t, p in pts]
   curves = tables.metric_curves({'Re-Nerfing': rows('Re-Nerfing', [(90, 19.), (220, 19.5)]),
@@ -139,8 +141,7 @@ def test_metric_curves_follow_each_variant_over_its_rounds():
 def test_equal_time_counts_each_round_at_its_own_pace(tmp_path):
   """A round run on a busier machine (every part slower alike) is worth the same steps:
   training seconds = round seconds - the synthesis seconds of its timing.json."""
-  sys.path.insert(0, str(REPO / 'experiments'))
-  import tables  # pylint: disable=g-import-not-at-top
+  from experiments import tables  # pylint: disable=g-import-not-at-top
   from renerf_jax import report  # pylint: disable=g-import-not-at-top
   assert tables.round_step_equivalents(100, 120., 100.) == pytest.approx(120.)
   assert tables.round_step_equivalents(100, 360., 300.) == pytest.approx(120.)
@@ -183,7 +184,7 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   """experiments/renerf_scenes.py: R1..R3, a masks row trained from the same B, B 2x
   longer and B at the rounds' total time, with paired deltas and win counts."""
   out = tmp_path / 'results'
-  cmd = ([sys.executable, 'experiments/renerf_scenes.py', '--name', 's', '--config',
+  cmd = ([sys.executable, '-m', 'experiments.renerf_scenes', '--name', 's', '--config',
           'gin_configs/demo.gin', '--out', str(out), '--seeds', '0', '1', '--scenes',
           'procedural', '--rounds_scenes', 'procedural', '--variant',
           'R1 + masks=Config.use_masks=True;Config.deform_log2_res=2;'
@@ -193,6 +194,7 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
                        check=False)
   assert res.returncode == 0, res.stderr[-3000:]
   result = json.loads((out / 's.json').read_text())
+  assert result['command'].startswith('python -m experiments.renerf_scenes --name s --config ')
   rows = result['rows']['procedural']
   eq = json.loads((out / 's' / 'procedural' / 'equal_time.json').read_text())
   assert set(rows) == {'B', 'R1', 'R2', 'R3', 'R1 + masks', 'B 2x steps',
@@ -240,7 +242,7 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   sub = subprocess.run(cmd + ['--table', 'v', '--seeds', '1'], cwd=REPO, capture_output=True,
                        text=True, timeout=600, check=False)
   assert sub.returncode == 0, sub.stderr[-3000:]
-  merge = [sys.executable, 'experiments/renerf_scenes.py', '--name', 'w', '--out', str(out),
+  merge = [sys.executable, '-m', 'experiments.renerf_scenes', '--name', 'w', '--out', str(out),
            '--merge', str(out / 't.json'), str(out / 'v.json')]
   sub = subprocess.run(merge, cwd=REPO, capture_output=True, text=True, timeout=600,
                        check=False)
@@ -264,7 +266,7 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
     assert bad.returncode != 0 and message in bad.stderr, bad.stderr[-2000:]
     assert 'Traceback' not in bad.stderr
   # experiments/test_renders.py: the photo | B | R1 | B 2x of the runs, from their PNGs.
-  renders = [sys.executable, 'experiments/test_renders.py', '--runs', str(out / 's'),
+  renders = [sys.executable, '-m', 'experiments.test_renders', '--runs', str(out / 's'),
              '--config', 'gin_configs/demo.gin', '--scenes', 'procedural',
              "--gin_bindings=Config.dataset_loader='procedural'"] + [
                  f'--gin_bindings={b}' for b in TINY]
@@ -282,7 +284,7 @@ def test_equal_time_comparison_takes_given_idle_rates_and_per_method_seeds(tmp_p
   """experiments/compare_equal_time.py with --sec_per_step (no calibration: steps = budget /
   the given rate, curve time = step x rate) and --seeds_of; bad values fail in one line."""
   out = tmp_path / 'results'
-  cmd = lambda *opts: ([sys.executable, 'experiments/compare_equal_time.py', '--name', 'eq',
+  cmd = lambda *opts: ([sys.executable, '-m', 'experiments.compare_equal_time', '--name', 'eq',
                         '--base', 'gin_configs/demo.gin', '--out', str(out), '--budget_s', '6',
                         '--seeds', '0', '1', '--method', 'A=', '--method',
                         'B=gin_configs/modifiers/no_depth_tv.gin', '--calib_steps', '2']
@@ -326,8 +328,7 @@ def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_ba
     tmp_path):
   """renerf_scenes.py on the Gaussians backbone: the paper's 3DGS delta (mip-NeRF 360,
   +0.81 dB) beside ours, and --merge keeps the backbone from the tables' JSON."""
-  sys.path.insert(0, str(REPO / 'experiments'))
-  import renerf_scenes  # pylint: disable=g-import-not-at-top
+  from experiments import renerf_scenes  # pylint: disable=g-import-not-at-top
   m = lambda p: {'psnr': p, 'ssim': 0.5, 'lpips_alex': 0.3, 'cumulative_seconds': 10.}
   rows = {'fern': {'B': {0: m(14.), 1: m(15.)}, 'R1': {0: m(14.5), 1: m(14.9)}}}
   summary = renerf_scenes.summarize(rows, ['fern'], [0, 1])
@@ -337,11 +338,12 @@ def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_ba
   assert '| paper R1 - 3DGS (mip-NeRF 360, 30 views: no LLFF 3DGS rows) | | +0.81 |' in gs
   assert 'paper R1 - 3DGS' not in renerf_scenes.markdown(summary, ['fern'], 'cmd')
   paths = []
-  for seed, backbone in ((0, 'gaussians'), (1, 'gaussians')):
+  # Commands as recorded before the scripts ran as modules, and since.
+  for seed, script in ((0, 'experiments/renerf_scenes.py'), (1, '-m experiments.renerf_scenes')):
     path = tmp_path / f't{seed}.json'
     path.write_text(json.dumps({
-        'command': 'python experiments/renerf_scenes.py --name x --config c.gin',
-        'backbone': backbone,
+        'command': f'python {script} --name x --config c.gin',
+        'backbone': 'gaussians',
         'rows': {'fern': {k: {str(seed): v[seed]} for k, v in rows['fern'].items()}}}))
     paths.append(str(path))
   merged, seeds, _, _, backbone = renerf_scenes.merged_rows(paths)

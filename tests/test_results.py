@@ -1,5 +1,6 @@
 """Results folders (experiments/results/<question>/): each says how it was made."""
 import os
+import pathlib
 import re
 import shlex
 
@@ -10,18 +11,45 @@ from renerf_jax.configs import load_config
 
 RESULTS = REPO / 'experiments' / 'results'
 FOLDERS = sorted(p for p in RESULTS.iterdir() if p.is_dir() and (p / 'README.md').exists())
-# At a line's start (an indented block) or in inline code, after optional VAR=value.
-COMMAND = re.compile(r'(?:^[ \t]*|`)(?:[A-Z_]+=\S*\s+)*python\s+(\S+\.py)([^\n`]*)', re.M)
+# At a line's start (an indented block) or in inline code, after optional VAR=value:
+# `python -m package.module ...` or `python path/script.py ...`.
+COMMAND = re.compile(r'(?:^[ \t]*|`)(?:[A-Z_]+=\S*\s+)*python\s+(?:-m\s+([\w.]+)|(\S+\.py))'
+                     r'([^\n`]*)', re.M)
 
 
 def commands(readme):
-  """(script, argument list) of each `python <script>.py ...` line of a README, with
-  backslash continuations joined."""
+  """(how, target, argument list) of each `python -m <module> ...` (how '-m') or
+  `python <script>.py ...` (how 'file') line of a README, with backslash continuations
+  joined."""
   text = readme.read_text().replace('\\\n', ' ')
   out = []
   for m in COMMAND.finditer(text):
-    out.append((m.group(1), shlex.split(m.group(2).replace('...', ''))))
+    how, target = ('-m', m.group(1)) if m.group(1) else ('file', m.group(2))
+    out.append((how, target, shlex.split(m.group(3).replace('...', ''))))
   return out
+
+
+def command_problem(how, target, repo=REPO):
+  """Why `python -m <target>` / `python <target>` run from the repository root would not
+  find what it runs (None if it would). A module must be a file of a package (every folder
+  on its way has an __init__.py); a script in such a package (experiments/, benchmarks/) is run
+  with -m, as its imports of the package need."""
+  if how == '-m':
+    *packages, name = target.split('.')
+    for i in range(len(packages)):
+      if not repo.joinpath(*packages[:i + 1], '__init__.py').is_file():
+        return f'python -m {target}: {".".join(packages[:i + 1])} is not a package'
+    if not (repo.joinpath(*packages, name + '.py').is_file()
+            or repo.joinpath(*packages, name, '__main__.py').is_file()):
+      return f'python -m {target}: no module {target} in the repository'
+    return None
+  if not (repo / target).is_file():
+    return f'{target} does not exist'
+  path = pathlib.PurePosixPath(target)
+  if (repo / path.parent / '__init__.py').is_file():
+    return (f'{target} is a module of a package: run it as '
+            f'python -m {".".join(path.with_suffix("").parts)}')
+  return None
 
 
 def config_args(args):
@@ -48,9 +76,11 @@ def test_results_folders_exist():
 @pytest.mark.parametrize('folder', FOLDERS, ids=[f.name for f in FOLDERS])
 def test_each_results_folder_names_commands_that_exist_and_configs_that_parse(folder):
   cmds = commands(folder / 'README.md')
-  assert cmds, f'{folder.name}/README.md names no `python <script>.py` command'
-  for script, args in cmds:
-    assert (REPO / script).is_file(), f'{folder.name}: {script} does not exist'
+  assert cmds, (f'{folder.name}/README.md names no `python -m <module>` or '
+                '`python <script>.py` command')
+  for how, target, args in cmds:
+    problem = command_problem(how, target)
+    assert problem is None, f'{folder.name}: {problem}'
     for gin in config_args(args):
       path = gin if os.path.isabs(gin) else str(REPO / gin)
       if not os.path.exists(path):
@@ -60,9 +90,26 @@ def test_each_results_folder_names_commands_that_exist_and_configs_that_parse(fo
 
 def test_command_parsing_handles_continuations_and_config_lists(tmp_path):
   readme = tmp_path / 'README.md'
-  readme.write_text('Run:\n\n    python experiments/renerf_scenes.py --name x \\\n'
+  readme.write_text('Run:\n\n    python -m experiments.renerf_scenes --name x \\\n'
                     '      --config a.gin b.gin --seeds 0 1\n'
-                    'and `python train.py --gin_configs=c.gin --run_dir=...` once.\n')
-  (c1, a1), (c2, a2) = commands(readme)
-  assert c1 == 'experiments/renerf_scenes.py' and config_args(a1) == ['a.gin', 'b.gin']
-  assert c2 == 'train.py' and config_args(a2) == ['c.gin']
+                    'and `python train.py --gin_configs=c.gin --run_dir=...` once.\n'
+                    '    OUT=/tmp/o python experiments/renerf_scenes.py --config d.gin\n')
+  (h1, c1, a1), (h2, c2, a2), (h3, c3, a3) = commands(readme)
+  assert (h1, c1) == ('-m', 'experiments.renerf_scenes')
+  assert config_args(a1) == ['a.gin', 'b.gin'] and a1[:2] == ['--name', 'x']
+  assert (h2, c2) == ('file', 'train.py') and config_args(a2) == ['c.gin']
+  assert (h3, c3) == ('file', 'experiments/renerf_scenes.py') and config_args(a3) == ['d.gin']
+
+
+def test_a_command_must_run_a_module_or_script_that_exists():
+  for how, target in (('-m', 'experiments.renerf_scenes'), ('-m', 'benchmarks.bench_hessian'),
+                      ('file', 'train.py'),
+                      ('file', 'experiments/results/xla_cpu_crash/repro.py')):
+    assert command_problem(how, target) is None, target
+  assert 'no module experiments.no_such_table' in command_problem(
+      '-m', 'experiments.no_such_table')
+  assert 'gin_configs is not a package' in command_problem('-m', 'gin_configs.demo')
+  assert 'does not exist' in command_problem('file', 'experiments/no_such_table.py')
+  # The scripts of the experiments package import it: they run with -m only.
+  assert 'run it as python -m experiments.renerf_scenes' in command_problem(
+      'file', 'experiments/renerf_scenes.py')

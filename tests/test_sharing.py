@@ -1,19 +1,16 @@
 """Work shared between the variants of a table (experiments/sharing.py)."""
 import dataclasses
 import os
-import sys
 
 import jax
 import numpy as np
 import pytest
 
-from conftest import REPO, tiny_config, tree_files
+from conftest import tiny_config, tree_files
+from experiments import sharing
 from renerf_jax import resume, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.pseudo_views import load_pseudo_views, pseudo_view_poses
-
-sys.path.insert(0, str(REPO / 'experiments'))
-import sharing  # pylint: disable=g-import-not-at-top,g-bad-import-order
 
 
 def test_sharing_rules_derive_from_the_config_field_categories():

@@ -135,15 +135,12 @@ def test_train_model_resumes_from_a_mid_run_checkpoint(tmp_path, monkeypatch):
 
 _SHARD_SCRIPT = r'''
 import jax, numpy as np
-import sys
-sys.path.insert(0, {repo!r})
-sys.path.insert(0, {tests!r})
 from conftest import tiny_config
 from renerf_jax import rundir, training
 from renerf_jax.datasets import load_scene, ray_pool
 config = tiny_config(depth_tv_loss_mult=0., anneal_nearfar=False, density_noise=0.)
 scene = load_scene(config)
-pools = {{'real': ray_pool(scene, scene.train_idx)}}
+pools = {'real': ray_pool(scene, scene.train_idx)}
 state = training.init_state(config, jax.random.PRNGKey(0))
 cam = training.Camera.of(scene)
 for i in range(3):
@@ -156,9 +153,8 @@ def test_data_parallel_on_two_host_devices_matches_one():
   out = []
   for n in (1, 2):
     env = dict(os.environ, XLA_FLAGS=f'--xla_force_host_platform_device_count={n}',
-               JAX_PLATFORMS='cpu')
-    script = _SHARD_SCRIPT.format(repo=str(REPO), tests=str(REPO / 'tests'))
-    res = subprocess.run([sys.executable, '-c', script], env=env, capture_output=True,
+               JAX_PLATFORMS='cpu', PYTHONPATH=os.pathsep.join([str(REPO), str(REPO / 'tests')]))
+    res = subprocess.run([sys.executable, '-c', _SHARD_SCRIPT], env=env, capture_output=True,
                          text=True, timeout=300, check=True)
     devices, loss = res.stdout.split()
     assert int(devices) == n

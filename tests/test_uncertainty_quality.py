@@ -135,7 +135,7 @@ TINY = ['Config.procedural_size = (32, 40)', 'Config.image_downsample = 1',
 
 
 def test_script_end_to_end_on_the_procedural_scene(tmp_path):
-  cmd = [sys.executable, 'experiments/uncertainty_quality.py', '--name', 'uq', '--out',
+  cmd = [sys.executable, '-m', 'experiments.uncertainty_quality', '--name', 'uq', '--out',
          str(tmp_path), '--scenes', 'procedural', '--seeds', '0'] + [
              f'--gin_bindings={b}' for b in TINY]
   res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,

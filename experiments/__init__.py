@@ -1,0 +1,1 @@
+"""Experiment scripts (tables, ablations, plots): python -m experiments.<name>."""
