@@ -11,8 +11,8 @@ import sys
 
 from renerf_jax import cli, report, rundir
 from renerf_jax.backbones import get_backbone
-from renerf_jax.configs import exit_on_error
 from renerf_jax.datasets import load_scene
+from renerf_jax.outputs import save_evaluation
 from renerf_jax.renerf import initial_state, round_config, rounds_table
 from renerf_jax.resume import load_round, round_dir
 
@@ -37,12 +37,12 @@ def round_eval_dir(config, scene, params, rdir, r):
     if os.path.isfile(path) and wanted <= set(report.read_json(path)['mean']):
       return os.path.dirname(path)
   out = os.path.join(rdir, 'eval_extra')
-  get_backbone(config).evaluate(round_config(config, r), scene, params, out,
-                                show_progress=True)
+  save_evaluation(out, get_backbone(config).evaluate(round_config(config, r), scene,
+                                                     params, show_progress=True))
   return out
 
 
-@exit_on_error
+@cli.exit_on_error
 def main(argv=None):
   config, run_dir = cli.setup(argv, __doc__)
   cli.check_run_dir(config, run_dir, create=False)

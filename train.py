@@ -3,12 +3,11 @@ import os
 import sys
 
 from renerf_jax import cli, report, resume
-from renerf_jax.configs import exit_on_error
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import check_rounds_config, deltas_vs_baseline, rounds_table
 
 
-@exit_on_error
+@cli.exit_on_error
 def main(argv=None):
   config, run_dir = cli.setup(argv, __doc__)
   scene = load_scene(config)

@@ -1,15 +1,16 @@
 """What the round driver needs of a model family (`Config.backbone`).
 
 Re-Nerfing is an add-on to any novel-view-synthesis backbone. A round needs five things
-of one, each a function of the Config and the Scene, none of which writes a file unless
-given a directory:
+of one, each a function of the Config and the Scene; only `train` writes files (its
+checkpoints and log, through rundir, when given a directory), the rest return arrays
+that resume.py writes (outputs.py):
 
   init_params(config)                        -> a parameter template (loading a round)
   train(config, scene, out_dir, pseudo, ...) -> training.TrainResult, trained from scratch
       on the real training views plus the pseudo-views (drawn inside the step window)
   synthesize(config, scene, params, ...)     -> (PseudoViews, timing, meta)
   cheap_eval_fn(config, scene)               -> params -> test PSNR (training curves)
-  evaluate(config, scene, params, out_dir)   -> {'per_image': [...], 'mean': {...}}
+  evaluate(config, scene, params)           -> evaluation.Evaluation (metrics, renders)
 
 and, for anything that looks at a model, `render_views(config, scene, params, poses)`:
 RGB, depth and accumulated opacity at cameras; optionally `export(params, round_dir)`,
@@ -167,14 +168,14 @@ def gaussians_cheap_eval_fn(config, scene):
   return cheap_eval_by_rendering(gaussians_render_views, config, scene)
 
 
-def gaussians_evaluate(config, scene, params, out_dir, show_progress=False):
-  """Test-view metrics (and PNGs in out_dir) of the Gaussians."""
+def gaussians_evaluate(config, scene, params, show_progress=False):
+  """Test-view metrics and renders of the Gaussians (evaluation.Evaluation)."""
   def render_view(j, i):
     del j
     out = gaussians_render_views(config, scene, params, scene.poses[[i]],
                                  show_progress=show_progress)
     return {'rgb': out['rgb'][0], 'distance': out['depth'][0]}
-  return evaluate_views(config, scene, render_view, out_dir)
+  return evaluate_views(config, scene, render_view)
 
 
 def gaussians_export(params, rdir):

@@ -1,11 +1,51 @@
-"""Shared pieces of the command-line entry points (train.py, eval.py)."""
+"""Shared pieces of the command-line entry points (train.py, eval.py): flags, the run
+directory, one-line errors."""
+import argparse
 import dataclasses
 import os
+import sys
+from typing import Optional, Sequence
 
 from renerf_jax import jit_cache, report
-from renerf_jax.configs import (config_differences, config_to_gin, default_run_dir,
-                                fields_where, load_config, parse_args)
-from renerf_jax.errors import RunDirError
+from renerf_jax.configs import config_differences, config_to_gin, fields_where, load_config
+from renerf_jax.errors import USER_ERRORS, RunDirError
+
+
+def parse_args(argv: Optional[Sequence[str]] = None, description: str = ''):
+  """Parses --gin_configs / --gin_bindings (both repeatable) and other flags.
+
+  Args:
+    argv: command-line arguments without the program name (default sys.argv[1:]).
+    description: help text.
+
+  Returns:
+    argparse.Namespace with gin_configs, gin_bindings, run_dir.
+  """
+  parser = argparse.ArgumentParser(description=description)
+  parser.add_argument('--gin_configs', action='append', default=[],
+                      help='gin config file (repeatable)')
+  parser.add_argument('--gin_bindings', action='append', default=[],
+                      help="gin binding, e.g. \"Config.max_steps=100\" (repeatable)")
+  parser.add_argument('--run_dir', default=None,
+                      help='run directory (default runs/<config name>)')
+  return parser.parse_args(argv)
+
+
+def default_run_dir(gin_configs: Sequence[str]) -> str:
+  """runs/<stems of the gin files joined by '+'>, e.g. runs/llff3_cpu+renerf."""
+  stems = [os.path.splitext(os.path.basename(p))[0] for p in gin_configs]
+  return os.path.join('runs', '+'.join(stems) if stems else 'default')
+
+
+def exit_on_error(fn):
+  """Decorator for CLI mains: known user errors become one line on stderr and exit 2."""
+  def wrapped(*args, **kwargs):
+    try:
+      return fn(*args, **kwargs)
+    except USER_ERRORS as e:
+      print(f'error: {e}', file=sys.stderr)
+      sys.exit(2)
+  return wrapped
 
 
 def setup(argv, description):

@@ -4,17 +4,15 @@ The Config is passed as a *static* argument to the jitted steps, so every switch
 (a disabled regulariser, NDC on/off, the field backbone) decides at trace time which code
 exists in the compiled step: switched-off work costs nothing.
 """
-import argparse
 import dataclasses
 import logging
-import math
 import os
-import sys
-from typing import Optional, Sequence, Tuple
+from typing import Sequence, Tuple
 
 import gin
 
-from renerf_jax.errors import ConfigError, USER_ERRORS
+from renerf_jax.config_checks import check_config
+from renerf_jax.errors import ConfigError
 from renerf_jax.report import to_jsonable
 
 
@@ -266,111 +264,7 @@ class Config:
   lpips_nets: Tuple[str, ...] = _f(('alex', 'vgg'), 'report')
 
   def __post_init__(self):
-    _check(isinstance(self.llff_min_near, (tuple, list)) and all(
-        isinstance(p, (tuple, list)) and len(p) == 2 and isinstance(p[0], str)
-        and isinstance(p[1], (int, float)) and not isinstance(p[1], bool)
-        and math.isfinite(p[1]) and p[1] > 0 for p in self.llff_min_near),
-           f'Config.llff_min_near={self.llff_min_near!r} must be (scene name, near > 0) '
-           'pairs')
-    object.__setattr__(self, 'llff_min_near', tuple(
-        (name, float(near)) for name, near in self.llff_min_near if name == self.scene))
-    _check(self.dataset_loader in ('llff', 'transforms', 'blender', 'procedural'),
-           f'Config.dataset_loader={self.dataset_loader!r} (llff, transforms, blender or '
-           'procedural)')
-    _check(not self.piecewise_spacing or self.near < 1. < self.far,
-           f'Config.piecewise_spacing needs near < 1 < far, not near={self.near}, '
-           f'far={self.far}')
-    _check(self.contraction in ('', 'l2', 'inf'),
-           f"Config.contraction={self.contraction!r} ('', 'l2' or 'inf')")
-    _check(not (self.contraction and self.use_ndc),
-           f'Config.contraction={self.contraction!r} is for unbounded scenes, not NDC '
-           '(Config.use_ndc=True)')
-    _check(self.ray_shape in ('cone', 'cylinder'),
-           f'Config.ray_shape={self.ray_shape!r} (cone or cylinder)')
-    _check(self.density_activation in ('softplus', 'exp'),
-           f'Config.density_activation={self.density_activation!r} (softplus or exp)')
-    _check(self.backbone in ('nerf', 'gaussians'),
-           f'Config.backbone={self.backbone!r} (nerf or gaussians)')
-    _check(self.gs_init_points >= 1 and self.gs_capacity >= self.gs_init_points,
-           f'Config.gs_capacity={self.gs_capacity} must be >= Config.gs_init_points='
-           f'{self.gs_init_points} >= 1')
-    _check(0. < self.gs_init_opacity < 1.,
-           f'Config.gs_init_opacity={self.gs_init_opacity} must lie in (0, 1)')
-    _check(self.gs_tile_cap >= 0,
-           f'Config.gs_tile_cap={self.gs_tile_cap} must be >= 0 (0: no cap)')
-    _check(self.gs_extent >= 0., f'Config.gs_extent={self.gs_extent} must be >= 0')
-    for name in ('gs_sh_interval_frac', 'gs_densify_every_frac',
-                 'gs_opacity_reset_every_frac'):
-      _check(getattr(self, name) > 0., f'Config.{name}={getattr(self, name)} must be > 0')
-    _check(0. <= self.gs_densify_from_frac <= self.gs_densify_until_frac <= 1.,
-           f'Config.gs_densify_from_frac={self.gs_densify_from_frac} and '
-           f'gs_densify_until_frac={self.gs_densify_until_frac} must satisfy '
-           '0 <= from <= until <= 1')
-    for name in ('gs_grad_threshold', 'gs_percent_dense', 'gs_lr_means_init',
-                 'gs_lr_means_final', 'gs_lr_sh_dc', 'gs_lr_sh_rest', 'gs_lr_opacity',
-                 'gs_lr_scales', 'gs_lr_quats'):
-      _check(getattr(self, name) > 0., f'Config.{name}={getattr(self, name)} must be > 0')
-    _check(0. <= self.gs_min_opacity < 1.,
-           f'Config.gs_min_opacity={self.gs_min_opacity} must lie in [0, 1)')
-    _check(0. <= self.gs_lambda_dssim <= 1.,
-           f'Config.gs_lambda_dssim={self.gs_lambda_dssim} must lie in [0, 1]')
-    _check(len(self.gs_background) == 3,
-           f'Config.gs_background={self.gs_background!r} must be an RGB triple')
-    _check(self.field in ('mlp', 'grid'), f'Config.field={self.field!r} (mlp or grid)')
-    _check(self.sampler in ('coarse_fine', 'proposal'),
-           f'Config.sampler={self.sampler!r} (coarse_fine or proposal)')
-    _check(self.sampler != 'proposal' or self.num_levels == 2,
-           f'Config.sampler=\'proposal\' needs Config.num_levels = 2 (one proposal '
-           f'level, then the scene field), got {self.num_levels}')
-    _check(self.sampler != 'proposal' or self.stop_level_grad,
-           'Config.sampler=\'proposal\' needs Config.stop_level_grad = True (the '
-           'proposal is trained by the interlevel loss alone)')
-    _check(self.distortion_loss_mult >= 0.,
-           f'Config.distortion_loss_mult={self.distortion_loss_mult} must be >= 0')
-    _check(self.proposal_samples >= 2,
-           f'Config.proposal_samples={self.proposal_samples} must be >= 2')
-    _check(self.pseudo_source in ('render', 'photo'),
-           f'Config.pseudo_source={self.pseudo_source!r} (render or photo)')
-    _check(self.pseudo_schedule in ('early', 'all', 'late'),
-           f'Config.pseudo_schedule={self.pseudo_schedule!r} (early, all or late)')
-    _check(self.renerf_init in ('reset', 'continue'),
-           f'Config.renerf_init={self.renerf_init!r} (reset or continue)')
-    _check(self.mask_signal in ('laplace', 'one_minus_acc', 'depth_variance',
-                                'weight_entropy'),
-           f'Config.mask_signal={self.mask_signal!r} (laplace, one_minus_acc, '
-           'depth_variance or weight_entropy)')
-    _check(self.pseudo_mix in ('pixels', 'fraction'),
-           f'Config.pseudo_mix={self.pseudo_mix!r} (pixels or fraction)')
-    _check(0. <= self.pseudo_frac <= 1.,
-           f'Config.pseudo_frac={self.pseudo_frac} must lie in [0, 1]')
-    _check(0. <= self.pseudo_until_frac <= 1.,
-           f'Config.pseudo_until_frac={self.pseudo_until_frac} must lie in [0, 1] (K as '
-           f'a fraction of Config.max_steps)')
-    _check(self.max_steps > 0, f'Config.max_steps={self.max_steps} must be > 0')
-    _check(0. <= self.lr_decay_start_frac < 1.,
-           f'Config.lr_decay_start_frac={self.lr_decay_start_frac} must lie in [0, 1)')
-    k = pseudo_steps(self)
-    _check(self.num_rounds == 0 or self.pseudo_schedule != 'early' or not self.anneal_nearfar
-           or k >= min(self.anneal_nearfar_steps, self.max_steps),
-           f'Config.pseudo_until_frac={self.pseudo_until_frac} puts K at step {k} of '
-           f'{self.max_steps}, before the near/far annealing ends (step '
-           f'{self.anneal_nearfar_steps}); raise it to at least '
-           f'{min(self.anneal_nearfar_steps, self.max_steps) / self.max_steps:.4f}')
-    _check(self.batch_size > 0, f'Config.batch_size={self.batch_size} must be > 0')
-    _check(self.num_samples >= 2, f'Config.num_samples={self.num_samples} must be >= 2')
-    _check(self.num_levels >= 1, f'Config.num_levels={self.num_levels} must be >= 1')
-    _check(self.n_input_views >= 1, f'Config.n_input_views={self.n_input_views} must be >= 1')
-    _check(self.far >= self.near, f'Config.far={self.far} < Config.near={self.near}')
-    _check(self.factor >= 1, f'Config.factor={self.factor} must be >= 1')
-    _check(self.image_downsample >= 1,
-           f'Config.image_downsample={self.image_downsample} must be >= 1')
-    _check(self.hessian_chunk >= 1, f'Config.hessian_chunk={self.hessian_chunk} must be >= 1')
-    _check(self.render_chunk >= 1, f'Config.render_chunk={self.render_chunk} must be >= 1')
-
-
-def pseudo_steps(config) -> int:
-  """K in steps: round(Config.pseudo_until_frac * Config.max_steps)."""
-  return int(round(config.pseudo_until_frac * config.max_steps))
+    check_config(self)
 
 
 def field_category(name: str) -> str:
@@ -410,31 +304,6 @@ class _DropGinPathProbe(logging.Filter):
 
 
 logging.getLogger().addFilter(_DropGinPathProbe())
-
-
-def _check(cond: bool, msg: str):
-  if not cond:
-    raise ConfigError(msg)
-
-
-def parse_args(argv: Optional[Sequence[str]] = None, description: str = ''):
-  """Parses --gin_configs / --gin_bindings (both repeatable) and other flags.
-
-  Args:
-    argv: command-line arguments without the program name (default sys.argv[1:]).
-    description: help text.
-
-  Returns:
-    argparse.Namespace with gin_configs, gin_bindings, run_dir.
-  """
-  parser = argparse.ArgumentParser(description=description)
-  parser.add_argument('--gin_configs', action='append', default=[],
-                      help='gin config file (repeatable)')
-  parser.add_argument('--gin_bindings', action='append', default=[],
-                      help="gin binding, e.g. \"Config.max_steps=100\" (repeatable)")
-  parser.add_argument('--run_dir', default=None,
-                      help='run directory (default runs/<config name>)')
-  return parser.parse_args(argv)
 
 
 # The repository's gin_configs/ folder: bare --gin_configs names (llff3.gin, llff3) are
@@ -512,20 +381,3 @@ def config_to_gin(config: Config) -> str:
   """The Config as a gin file of bindings that reproduces it exactly."""
   return '\n'.join(f'Config.{f.name} = {getattr(config, f.name)!r}'
                     for f in dataclasses.fields(config)) + '\n'
-
-
-def default_run_dir(gin_configs: Sequence[str]) -> str:
-  """runs/<stems of the gin files joined by '+'>, e.g. runs/llff3_cpu+renerf."""
-  stems = [os.path.splitext(os.path.basename(p))[0] for p in gin_configs]
-  return os.path.join('runs', '+'.join(stems) if stems else 'default')
-
-
-def exit_on_error(fn):
-  """Decorator for CLI mains: known user errors become one line on stderr and exit 2."""
-  def wrapped(*args, **kwargs):
-    try:
-      return fn(*args, **kwargs)
-    except USER_ERRORS as e:
-      print(f'error: {e}', file=sys.stderr)
-      sys.exit(2)
-  return wrapped

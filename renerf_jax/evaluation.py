@@ -1,5 +1,8 @@
-"""Test-view evaluation: cheap strided PSNR during training, full metrics at the end."""
-import os
+"""Test-view evaluation: cheap strided PSNR during training, full metrics at the end.
+
+Nothing here writes a file: outputs.save_evaluation does, at the edge (resume.py, eval.py).
+"""
+import dataclasses
 
 import jax
 import numpy as np
@@ -27,60 +30,69 @@ def cheap_eval_fn(config, scene):
   return fn
 
 
-def evaluate_test_views(config, scene, params, out_dir, show_progress=True):
-  """Renders every test view of a NeRF, writes PNGs and per-image + mean metrics.
+@dataclasses.dataclass(frozen=True)
+class Evaluation:
+  """One model's test views: metrics and the renders they were computed from.
+
+  Attributes:
+    per_image: per-view metric dicts ('name': test_XXX, 'psnr', 'ssim', 'lpips_*', ...).
+    mean: their means (report.per_image_table's last row, without 'name').
+    images: [N, H, W, 3] renders clipped to [0, 1], in scene.test_idx order.
+    distances: [N, H, W] rendered depth (distance along the ray).
+    columns: the metric columns of the markdown table.
+  """
+  per_image: list
+  mean: dict
+  images: np.ndarray
+  distances: np.ndarray
+  columns: tuple
+
+  def summary(self) -> dict:
+    """{'per_image': [...], 'mean': {...}}: what metrics.json holds."""
+    return {'per_image': self.per_image, 'mean': self.mean}
+
+
+def evaluate_test_views(config, scene, params, show_progress=True) -> Evaluation:
+  """Renders every test view of a NeRF and scores it (outputs.save_evaluation writes it).
 
   Args:
     config: Config. scene: Scene. params: field parameters.
-    out_dir: folder for test_XXX.png, depth_XXX.png, metrics.json, metrics.md (None:
-      nothing is written).
     show_progress: progress bar over rays.
 
   Returns:
-    dict {'per_image': [...], 'mean': {...}}.
+    Evaluation.
   """
   rays = camera_rays(scene, scene.test_idx)
 
   def render_view(j, i):
     return render_image(config, params, jax.tree_util.tree_map(lambda x: x[j], rays),
                         show_progress=show_progress, desc=f'test view {i}')
-  return evaluate_views(config, scene, render_view, out_dir)
+  return evaluate_views(config, scene, render_view)
 
 
-def evaluate_views(config, scene, render_view, out_dir):
-  """Per-image and mean metrics of any backbone's test renders (and their PNGs).
+def evaluate_views(config, scene, render_view) -> Evaluation:
+  """Per-image and mean metrics of any backbone's test renders.
 
   Args:
     config: Config (config.lpips_nets). scene: Scene.
     render_view: (j, i) -> {'rgb': [H, W, 3], 'distance': [H, W]} of test view i, the
-      j-th of scene.test_idx (distance: the depth shown in depth_XXX.png).
-    out_dir: folder for test_XXX.png, depth_XXX.png, metrics.json, metrics.md (None:
-      nothing is written).
+      j-th of scene.test_idx (distance: the depth of the depth maps).
 
   Returns:
-    dict {'per_image': [...], 'mean': {...}}.
+    Evaluation.
   """
-  if out_dir is not None:
-    os.makedirs(out_dir, exist_ok=True)
-  per_image = []
+  per_image, images, distances = [], [], []
   for j, i in enumerate(scene.test_idx):
     out = render_view(j, i)
     pred = np.clip(out['rgb'], 0., 1.)
     m = metrics.image_metrics(pred, scene.images[i], config.lpips_nets)
     m['name'] = f'test_{int(i):03d}'
     per_image.append(m)
-    if out_dir is None:
-      continue
-    report.save_image_png(os.path.join(out_dir, f'test_{int(i):03d}.png'), pred)
-    report.save_image_png(os.path.join(out_dir, f'depth_{int(i):03d}.png'),
-                          report.colorize(out['distance']))
+    images.append(np.asarray(pred, np.float32))
+    distances.append(np.asarray(out['distance'], np.float32))
   rows = report.per_image_table(per_image)
   mean = {k: v for k, v in rows[-1].items() if k != 'name'}
-  result = {'per_image': per_image, 'mean': mean}
-  if out_dir is None:
-    return result
-  report.write_json(os.path.join(out_dir, 'metrics.json'), result)
-  report.write_markdown(os.path.join(out_dir, 'metrics.md'), report.markdown_table(
-      rows, ['name', 'psnr', 'ssim'] + [f'lpips_{n}' for n in config.lpips_nets] +
-      (['avg_err'] if 'alex' in config.lpips_nets else [])) + '\n')
-  return result
+  columns = (('name', 'psnr', 'ssim') + tuple(f'lpips_{n}' for n in config.lpips_nets) +
+             (('avg_err',) if 'alex' in config.lpips_nets else ()))
+  return Evaluation(per_image=per_image, mean=mean, images=np.stack(images),
+                    distances=np.stack(distances), columns=columns)

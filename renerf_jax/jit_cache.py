@@ -7,7 +7,7 @@ config's train step on the 2-core CPU, several steps per round. The cache is key
 lowered computation (HLO) and the compile options, never on the Config, so a hit is the
 executable that compiling the same computation would give; only tracing is repeated
 (the first step of a new seed: 1.8 s instead of 7.1 s, of a new process: 2.4 s instead
-of 7.9 s; benchmarks/results/compile_cache.md, `python benchmarks/bench_compile_cache.py`).
+of 7.9 s; benchmarks/results/compile_cache.md, `python -m benchmarks.bench_compile_cache`).
 """
 import os
 

@@ -1,7 +1,8 @@
-"""Pseudo-views: model B rendered at poses between neighbouring training cameras."""
-import os
+"""Pseudo-views: model B rendered at poses between neighbouring training cameras.
+
+Nothing here writes a file: outputs.save_pseudo_views does, at the edge (resume.py).
+"""
 import time
-from typing import Optional
 
 import flax
 import jax
@@ -179,27 +180,6 @@ def render_pseudo_views(config, scene, params, poses, show_progress=True, view_c
               'cached_seconds': cached_seconds}
 
 
-def save_pseudo_views(directory, pv: PseudoViews, meta, save_png=True):
-  """Writes views.npz (atomically) and, per view, rgb / mask / uncertainty PNGs."""
-  os.makedirs(directory, exist_ok=True)
-  arrays = {k: np.asarray(getattr(pv, k)) for k in ('images', 'poses', 'masks',
-                                                     'uncertainty')}
-  with report.atomic_open(os.path.join(directory, 'views.npz'), 'wb') as f:
-    np.savez_compressed(f, **arrays)
-  report.write_json(os.path.join(directory, 'views.json'), meta)
-  if save_png:
-    for i in range(arrays['images'].shape[0]):
-      report.save_image_png(os.path.join(directory, f'view_{i:03d}.png'),
-                            arrays['images'][i])
-      report.save_image_png(os.path.join(directory, f'mask_{i:03d}.png'),
-                            arrays['masks'][i])
-      if np.any(arrays['uncertainty'][i]):
-        heat = uncertainty_heatmap(arrays['uncertainty'][i], arrays['uncertainty'])
-        report.save_image_png(os.path.join(directory, f'uncertainty_{i:03d}.png'), heat)
-        report.save_image_png(os.path.join(directory, f'panel_{i:03d}.png'),
-                              side_by_side(arrays['images'][i], heat, arrays['masks'][i]))
-
-
 def uncertainty_heatmap(u, ref=None):
   """[H, W, 3] turbo heat-map of U, coloured by each pixel's quantile of U in `ref`
   (default u; pass all views to share one scale): histogram-equalised. U often clusters
@@ -223,11 +203,3 @@ def side_by_side(image, heat, mask):
   gap = np.ones(image.shape[:1] + (4, 3), np.float32)
   return np.concatenate([image[..., :3], gap, heat[..., :3], gap, image[..., :3] * mask],
                         axis=1)
-
-
-def load_pseudo_views(directory) -> Optional[PseudoViews]:
-  path = os.path.join(directory, 'views.npz')
-  if not os.path.isfile(path):
-    return None
-  with np.load(path) as z:
-    return PseudoViews(**{k: z[k] for k in ('images', 'poses', 'masks', 'uncertainty')})

@@ -158,7 +158,7 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
     train_fn: (config, scene, pseudo: PseudoViews or None, **kwargs) ->
       training.TrainResult (kwargs: window, init_params, eval_fn, time_offset, desc,
       show_progress, as training.train_model takes them).
-    evaluate_fn: (config, scene, params) -> {'mean': metrics, ...}.
+    evaluate_fn: (config, scene, params) -> evaluation.Evaluation.
     resume.py binds them to a round directory.
 
   Returns:
@@ -170,7 +170,7 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
   train_fn = train_fn or (lambda cfg, sc, pseudo, **kw: backbone.train(cfg, sc, None,
                                                                         pseudo, **kw))
   evaluate_fn = evaluate_fn or (lambda cfg, sc, params: backbone.evaluate(
-      cfg, sc, params, None, show_progress=False))
+      cfg, sc, params, show_progress=False))
   r = state.round_index + 1
   cfg = round_config(config, r)
   pseudo, synth_seconds = None, 0.
@@ -186,7 +186,7 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
       desc=f'round {r}' if r else 'baseline', show_progress=show_progress)
   seconds = start + result.train_seconds
   ev = evaluate_fn(cfg, scene, result.state.params)
-  metrics = dict(ev['mean'], round=r, round_seconds=synth_seconds + result.train_seconds,
+  metrics = dict(ev.mean, round=r, round_seconds=synth_seconds + result.train_seconds,
                  cumulative_seconds=seconds, nan_skips=int(result.state.nan_skips))
   return RoundState(params=result.state.params, pseudo=pseudo, round_index=r,
                     metrics=state.metrics + (metrics,),

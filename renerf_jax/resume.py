@@ -16,7 +16,7 @@ from typing import Callable, Optional
 from flax import serialization
 
 from renerf_jax import backbones, renerf, report, rundir
-from renerf_jax.pseudo_views import load_pseudo_views, save_pseudo_views
+from renerf_jax.outputs import load_pseudo_views, save_evaluation, save_pseudo_views
 
 
 def round_dir(run_dir, r):
@@ -39,6 +39,19 @@ def stored_synthesis(out_dir, synthesize_fn: Callable = renerf.synthesize) -> Ca
     save_pseudo_views(out_dir, pv, meta)
     report.write_json(info_path, timing)  # Last: it marks the pseudo-views as complete.
     return pv, timing, meta
+  return fn
+
+
+def stored_evaluation(out_dir, evaluate_fn: Callable) -> Callable:
+  """evaluate_fn with its Evaluation written to out_dir (metrics.json/.md, renders).
+
+  Returns:
+    A function like renerf.round_step's evaluate_fn.
+  """
+  def fn(config, scene, params):
+    ev = evaluate_fn(config, scene, params)
+    save_evaluation(out_dir, ev)
+    return ev
   return fn
 
 
@@ -97,7 +110,8 @@ def run_rounds(config, scene, run_dir, show_progress=True,
                                        synthesize_fn or backbone.synthesize),
         train_fn=lambda cfg, sc, pseudo, **kw: backbone.train(cfg, sc, train_dir, pseudo,
                                                               **kw),
-        evaluate_fn=lambda cfg, sc, params: backbone.evaluate(cfg, sc, params, eval_dir,
-                                                              show_progress=False))
+        evaluate_fn=stored_evaluation(
+            eval_dir, lambda cfg, sc, params: backbone.evaluate(cfg, sc, params,
+                                                                show_progress=False)))
     save_round(rdir, state, backbone.export)
   return state

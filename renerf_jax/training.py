@@ -16,7 +16,7 @@ import optax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from renerf_jax import cameras, metrics, regularizers, rundir
-from renerf_jax.configs import pseudo_steps
+from renerf_jax.config_checks import pseudo_steps
 from renerf_jax.fields import frequency_mask, init_field_params
 from renerf_jax.fields.proposal import interlevel_loss
 from renerf_jax.model import colour_levels, render_rays

@@ -7,7 +7,9 @@ import sys
 
 import pytest
 
-from renerf_jax.configs import Config, default_run_dir, load_config, pseudo_steps
+from renerf_jax.cli import default_run_dir
+from renerf_jax.config_checks import pseudo_steps
+from renerf_jax.configs import Config, load_config
 from renerf_jax.errors import ConfigError
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

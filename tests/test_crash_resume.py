@@ -1,13 +1,14 @@
 """Crash safety: train.py killed with SIGKILL at several moments, then rerun to the end.
 
 One uninterrupted reference run, then a second run directory in which the same command
-is killed (a) while training round 0 after its first checkpoint, (b) right at the rename
-that would write round_0/DONE (every other round-0 file already written), (c) while
-rendering round 1's pseudo-views, and (d) right at the rename of a round-1 checkpoint
-(its temp file complete, the rename not done: the worst moment of an atomic write), and
-is then rerun until it finishes. (a) and (c) are SIGKILLs sent by this test when it sees
-the phase in the run directory / the progress output; (b) and (d) are SIGKILLs the
-process sends itself from a wrapped os.replace, so they hit exactly that moment.
+is killed (a) while training round 0 after its first checkpoint (at the log write of
+step 60; the checkpoint is at step 40), (b) right at the rename that would write
+round_0/DONE (every other round-0 file already written), (c) while rendering round 1's
+pseudo-views (as the second view starts), and (d) right at the rename of a round-1
+checkpoint (its temp file complete, the rename not done: the worst moment of an atomic
+write), and is then rerun until it finishes. Every kill is a SIGKILL the process sends
+itself from a wrapped function (os.replace, or the n-th call of a library function), so
+it hits a known point whatever the machine's speed: no polling, no sleeps.
 
 Determinism that the comparison relies on (renerf_jax.training.train_model): step s uses
 the key fold_in(PRNGKey(seed), s) whether or not the run was resumed, a checkpoint holds
@@ -22,7 +23,6 @@ state, replay other random numbers) changes the batch loss logged every 20 steps
 more than that (another batch of 64 rays: percents), and the final PSNR by about as much
 as another seed does (0.05-0.1 dB for this config).
 """
-import glob
 import json
 import os
 import signal
@@ -48,17 +48,34 @@ BINDINGS = [
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'avg_err')
 RTOL = 1e-5  # See the module docstring.
 
-# Runs train.py with os.replace wrapped: the rename onto a path ending with
-# $RENERF_TEST_KILL_AT_RENAME SIGKILLs the process instead (its temp file is complete).
-_KILL_AT_RENAME = r'''
-import os, runpy, signal, sys
-target = os.environ['RENERF_TEST_KILL_AT_RENAME']
-_replace = os.replace
-def _replace_or_die(src, dst, *args, **kwargs):
-  if os.fspath(dst).endswith(target):
-    os.kill(os.getpid(), signal.SIGKILL)
-  return _replace(src, dst, *args, **kwargs)
-os.replace = _replace_or_die
+# Runs train.py with a kill point: with $RENERF_TEST_KILL_AT_RENAME, the rename onto a
+# path ending with it SIGKILLs the process instead (its temp file is complete); with
+# $RENERF_TEST_KILL_AT_CALL = 'module:function:n', the n-th call of module.function does
+# (before the call runs). Module-level functions are looked up at call time, so wrapping
+# the module attribute catches the library's own calls.
+_KILL_AT = r'''
+import importlib, os, runpy, signal, sys
+def _die():
+  os.kill(os.getpid(), signal.SIGKILL)
+target = os.environ.get('RENERF_TEST_KILL_AT_RENAME')
+if target:
+  _replace = os.replace
+  def _replace_or_die(src, dst, *args, **kwargs):
+    if os.fspath(dst).endswith(target):
+      _die()
+    return _replace(src, dst, *args, **kwargs)
+  os.replace = _replace_or_die
+call = os.environ.get('RENERF_TEST_KILL_AT_CALL')
+if call:
+  module_name, name, n = call.split(':')
+  module = importlib.import_module(module_name)
+  fn, calls = getattr(module, name), [0]
+  def _call_or_die(*args, **kwargs):
+    calls[0] += 1
+    if calls[0] == int(n):
+      _die()
+    return fn(*args, **kwargs)
+  setattr(module, name, _call_or_die)
 sys.argv = sys.argv[1:]
 runpy.run_path(sys.argv[0], run_name='__main__')
 '''
@@ -69,7 +86,7 @@ def _args(run_dir):
           [f'--gin_bindings={b}' for b in BINDINGS])
 
 
-def _env(tmp_path, kill_at=None):
+def _env(tmp_path, kill_at=None, kill_at_call=None):
   # A compilation cache shared by the runs of this test only saves compile time (the
   # cached executables are the ones a fresh compilation produces).
   env = dict(os.environ, PYTHONPATH=str(REPO),
@@ -78,20 +95,22 @@ def _env(tmp_path, kill_at=None):
              JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES='-1')
   if kill_at:
     env['RENERF_TEST_KILL_AT_RENAME'] = kill_at
+  if kill_at_call:
+    env['RENERF_TEST_KILL_AT_CALL'] = kill_at_call
   return env
 
 
 @pytest.fixture
 def start(tmp_path):
-  """start(run_dir, log_name, kill_at=None) -> Popen of train.py; survivors are killed."""
+  """start(run_dir, log_name, kill_at=None, kill_at_call=None) -> Popen of train.py
+  (see _KILL_AT); survivors are killed."""
   procs = []
 
-  def fn(run_dir, log_name, kill_at=None):
-    prefix = ['-c', _KILL_AT_RENAME] if kill_at else []
+  def fn(run_dir, log_name, kill_at=None, kill_at_call=None):
     with open(tmp_path / log_name, 'w') as err:
-      procs.append(subprocess.Popen([sys.executable] + prefix + _args(run_dir), cwd=REPO,
-                                    env=_env(tmp_path, kill_at),
-                                    stdout=subprocess.DEVNULL, stderr=err))
+      procs.append(subprocess.Popen(
+          [sys.executable, '-c', _KILL_AT] + _args(run_dir), cwd=REPO,
+          env=_env(tmp_path, kill_at, kill_at_call), stdout=subprocess.DEVNULL, stderr=err))
     return procs[-1]
   yield fn
   for proc in procs:
@@ -100,20 +119,9 @@ def start(tmp_path):
       proc.wait()
 
 
-def _kill_when(proc, condition, timeout=240):
-  """SIGKILLs proc as soon as condition() holds; returns False if it exited first."""
-  deadline = time.monotonic() + timeout
-  while proc.poll() is None:
-    if condition():
-      os.kill(proc.pid, signal.SIGKILL)
-      proc.wait()
-      return True
-    if time.monotonic() > deadline:
-      os.kill(proc.pid, signal.SIGKILL)
-      proc.wait()
-      pytest.fail('train.py did not reach the phase to kill in time')
-    time.sleep(0.01)
-  return False
+def _killed(proc):
+  """Whether proc ended by its own SIGKILL (waits at most 10 minutes)."""
+  return proc.wait(timeout=600) == -signal.SIGKILL
 
 
 def _temp_files(directory):
@@ -140,33 +148,36 @@ def test_sigkill_at_any_moment_then_rerun_matches_uninterrupted_run(tmp_path, st
   assert res.returncode == 0, res.stderr[-2000:]
   t_ref = time.monotonic() - t_start
 
-  # (a) Killed while training round 0, after its first checkpoint.
+  # (a) Killed while training round 0, after its first checkpoint: at the third log
+  # write (step 60; steps are logged every 20, checkpointed every 40).
   r0 = run / 'round_0'
-  proc = start(run, 'a.err')
-  first_ckpt = lambda: glob.glob(str(r0 / 'train' / 'checkpoints' / 'checkpoint_*.msgpack'))
-  assert _kill_when(proc, first_ckpt), _read(tmp_path / 'a.err')[-2000:]
+  proc = start(run, 'a.err', kill_at_call='renerf_jax.rundir:append_jsonl:3')
+  assert _killed(proc), _read(tmp_path / 'a.err')[-2000:]
   assert not (r0 / 'DONE').exists()
+  assert os.listdir(r0 / 'train' / 'checkpoints') == ['checkpoint_00000040.msgpack']
   steps_a = [rec['step'] for rec in _log(run, 0)]
+  assert steps_a == [20, 40]
 
   # (b) Killed at the rename that writes round_0/DONE: everything else of round 0 exists.
   proc = start(run, 'b.err', kill_at='round_0/DONE')
-  assert proc.wait(timeout=600) == -signal.SIGKILL, _read(tmp_path / 'b.err')[-2000:]
+  assert _killed(proc), _read(tmp_path / 'b.err')[-2000:]
   assert not (r0 / 'DONE').exists() and (r0 / 'params.msgpack').exists()
   assert (r0 / 'result.json').exists() and len(_temp_files(r0)) == 1  # .DONE.*.tmp
 
-  # (c) Killed while rendering round 1's pseudo-views (round 0 is DONE by then).
-  proc = start(run, 'c.err')
-  assert _kill_when(proc, lambda: 'pseudo-views (' in _read(tmp_path / 'c.err')), \
-      _read(tmp_path / 'c.err')[-2000:]
+  # (c) Killed while rendering round 1's pseudo-views (round 0 is DONE by then), as the
+  # second view starts.
+  proc = start(run, 'c.err', kill_at_call='renerf_jax.pseudo_views:render_flat:2')
+  assert _killed(proc), _read(tmp_path / 'c.err')[-2000:]
+  assert 'pseudo-views (' in _read(tmp_path / 'c.err')
   assert (r0 / 'DONE').exists()
   assert _temp_files(r0) == []  # The resumed round 0 removed the stale temp file.
   round0 = tree_files(r0, digest=True)
-  views_after_c = (run / 'round_1' / 'pseudo_views' / 'views.npz').exists()
+  assert not (run / 'round_1' / 'pseudo_views' / 'views.npz').exists()
 
   # (d) Killed at the rename of round 1's second checkpoint (temp file complete).
   ckpt = 'round_1/train/checkpoints/checkpoint_00000080.msgpack'
   proc = start(run, 'd.err', kill_at=ckpt)
-  assert proc.wait(timeout=600) == -signal.SIGKILL, _read(tmp_path / 'd.err')[-2000:]
+  assert _killed(proc), _read(tmp_path / 'd.err')[-2000:]
   ckpt_dir = run / 'round_1' / 'train' / 'checkpoints'
   assert max(os.listdir(ckpt_dir)) == 'checkpoint_00000040.msgpack'
   assert _temp_files(ckpt_dir)  # The complete, never renamed .checkpoint_*.tmp.
@@ -212,6 +223,4 @@ def test_sigkill_at_any_moment_then_rerun_matches_uninterrupted_run(tmp_path, st
       np.testing.assert_allclose(g, w, rtol=RTOL, atol=1e-6)
       param_diff = max(param_diff, float(np.max(np.abs(g - w))))
   print(f'\nreference run {t_ref:.1f} s, whole test {time.monotonic() - t_start:.1f} s; '
-        f'(a) killed after logged steps {steps_a}; (c) views.npz written before the kill: '
-        f'{views_after_c}; max |param difference| {param_diff}; max metric differences: '
-        f'{diffs}')
+        f'max |param difference| {param_diff}; max metric differences: {diffs}')

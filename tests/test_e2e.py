@@ -11,6 +11,7 @@ from renerf_jax import training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.evaluation import evaluate_test_views
+from renerf_jax.outputs import save_evaluation
 from renerf_jax.renerf import make_pools
 from conftest import LLFF_DIR, REPO
 
@@ -29,12 +30,12 @@ def test_embedded_scene_training_beats_mean_colour_by_a_margin(tmp_path):
   scene = load_scene(config)
   result = training.train_model(config, scene, str(tmp_path), make_pools(config, scene, None),
                                 show_progress=False)
-  ev = evaluate_test_views(config, scene, result.state.params, str(tmp_path / 'eval'),
-                           show_progress=False)
+  ev = evaluate_test_views(config, scene, result.state.params, show_progress=False)
+  save_evaluation(str(tmp_path / 'eval'), ev)
   mean_colour = scene.images[scene.train_idx].reshape(-1, 3).mean(0)
   gt = scene.images[scene.test_idx]
   baseline_psnr = -10. * np.log10(np.mean((gt - mean_colour)**2))
-  assert ev['mean']['psnr'] > baseline_psnr + 2., (ev['mean'], baseline_psnr)
+  assert ev.mean['psnr'] > baseline_psnr + 2., (ev.mean, baseline_psnr)
   assert os.path.isfile(tmp_path / 'eval' / 'test_000.png')
 
 

@@ -14,6 +14,8 @@ from renerf_jax.gaussians import density
 from renerf_jax.gaussians import params as params_lib
 from renerf_jax.gaussians import ply
 from renerf_jax.gaussians import render as render_lib
+from renerf_jax.gaussians import loss as gloss
+from renerf_jax.gaussians import schedule as gschedule
 from renerf_jax.gaussians import training as gtrain
 from renerf_jax.pseudo_views import PseudoViews
 
@@ -172,7 +174,7 @@ def test_adam_moments_reset_for_changed_slots_and_opacity_reset():
   reset = np.array([0, 1, 0, 1, 0, 1, 1, 0], bool)
   moments = [s for s in jax.tree_util.tree_leaves(
       out.opt_state, is_leaf=lambda s: hasattr(s, 'mu')) if hasattr(s, 'mu')]
-  assert len(moments) == len(gtrain.FIELDS)
+  assert len(moments) == len(gschedule.FIELDS)
   for s in moments:
     assert int(s.count) == 0  # Adam's step count is kept.
     for x in jax.tree_util.tree_leaves((s.mu, s.nu)):
@@ -191,7 +193,7 @@ def test_adam_moments_reset_for_changed_slots_and_opacity_reset():
   keep = jax.nn.sigmoid(before) < 0.01
   np.testing.assert_array_equal(np.asarray(st.params.opacity_logits)[keep], before[keep])
   inner = st.opt_state.inner_states
-  for name in gtrain.FIELDS:
+  for name in gschedule.FIELDS:
     adam = inner[name].inner_state.inner_state[0]
     want = 0. if name == 'opacity_logits' else 1.
     assert np.all(np.asarray(adam.mu[name]) == want), name
@@ -204,22 +206,22 @@ def test_adam_moments_reset_for_changed_slots_and_opacity_reset():
 def test_learning_rates_and_sh_schedule():
   cfg = tiny_config(max_steps=30000)
   ext = 2.5
-  np.testing.assert_allclose(gtrain.means_lr(0, cfg, ext), 2.5 * 1.6e-4, rtol=1e-6)
-  np.testing.assert_allclose(gtrain.means_lr(15000, cfg, ext), 2.5 * 1.6e-5, rtol=1e-5)
-  np.testing.assert_allclose(gtrain.means_lr(30000, cfg, ext), 2.5 * 1.6e-6, rtol=1e-5)
-  np.testing.assert_allclose(gtrain.means_lr(40000, cfg, ext), 2.5 * 1.6e-6, rtol=1e-5)
-  lrs = gtrain.base_learning_rates(cfg, ext)
+  np.testing.assert_allclose(gschedule.means_lr(0, cfg, ext), 2.5 * 1.6e-4, rtol=1e-6)
+  np.testing.assert_allclose(gschedule.means_lr(15000, cfg, ext), 2.5 * 1.6e-5, rtol=1e-5)
+  np.testing.assert_allclose(gschedule.means_lr(30000, cfg, ext), 2.5 * 1.6e-6, rtol=1e-5)
+  np.testing.assert_allclose(gschedule.means_lr(40000, cfg, ext), 2.5 * 1.6e-6, rtol=1e-5)
+  lrs = gschedule.base_learning_rates(cfg, ext)
   want = {'means': 4e-4, 'sh_dc': 2.5e-3, 'sh_rest': 1.25e-4, 'opacity_logits': 0.05,
           'log_scales': 5e-3, 'quats': 1e-3}
   assert lrs.keys() == want.keys()
   for k, v in want.items():
     np.testing.assert_allclose(lrs[k], v, rtol=1e-12)
-  assert gtrain.ADAM_EPS == 1e-15
+  assert gschedule.ADAM_EPS == 1e-15
   # 3DGS: +1 degree every 1000 iterations (1-based), up to 3; densify 500..15000 / 100.
-  degrees = [int(gtrain.sh_degree_at(i, cfg)) for i in (1, 999, 1000, 1999, 2000, 3000,
+  degrees = [int(gschedule.sh_degree_at(i, cfg)) for i in (1, 999, 1000, 1999, 2000, 3000,
                                                         29000)]
   assert degrees == [0, 0, 1, 1, 2, 3, 3]
-  assert gtrain.densify_schedule(cfg) == (500, 15000, 100, 3000)
+  assert gschedule.densify_schedule(cfg) == (500, 15000, 100, 3000)
 
 
 def test_sh_coefficients_above_the_degree_get_no_gradient():
@@ -253,7 +255,7 @@ def test_masked_pixels_do_not_enter_the_loss():
   full = f(img, np.ones_like(mask))
   assert float(full[0]) != float(a[0])
   # With all weights 1 the masked SSIM is metrics.ssim_map.
-  ssim, w = gtrain.masked_ssim_map(full[2]['rgb'], img, jnp.ones((24, 32)))
+  ssim, w = gloss.masked_ssim_map(full[2]['rgb'], img, jnp.ones((24, 32)))
   np.testing.assert_allclose(ssim, metrics.ssim_map(full[2]['rgb'], img), atol=2e-6)
   assert np.all(np.asarray(w) == 1.)
   # An all-zero mask: no loss, no gradient of any field.

@@ -7,6 +7,7 @@ import pytest
 
 from renerf_jax import backbones, pseudo_views, renerf, resume, rundir
 from renerf_jax.datasets import load_scene
+from renerf_jax.evaluation import Evaluation
 from renerf_jax.pseudo_views import pseudo_view_poses, uncertainty_heatmap
 from renerf_jax.errors import ConfigError
 from conftest import tiny_config, tree_files
@@ -189,16 +190,20 @@ def test_the_round_driver_runs_any_backbone_through_its_interface(tmp_path, monk
                             uncertainty=np.zeros(rgb.shape[:3], np.float32))
     return pv, {'seconds': 0.5}, meta
 
-  def evaluate(config, scene, params, out_dir, show_progress=False):
-    del config, out_dir, show_progress
+  def evaluate(config, scene, params, show_progress=False):
+    del show_progress
     mse = float(np.mean((params['colour'] - scene.images[scene.test_idx])**2))
-    return {'per_image': [], 'mean': {'psnr': -10. * np.log10(mse)}}
+    rgb = render_views(config, scene, params, scene.poses[scene.test_idx])['rgb']
+    return Evaluation(per_image=[{'name': 'test_000', 'psnr': -10. * np.log10(mse)}],
+                      mean={'psnr': -10. * np.log10(mse)}, images=np.asarray(rgb),
+                      distances=np.ones(rgb.shape[:3], np.float32),
+                      columns=('name', 'psnr'))
 
   toy = backbones.Backbone(
       name='nerf', init_params=lambda config: {'colour': np.zeros(3, np.float32)},
       train=train, synthesize=synthesize,
-      cheap_eval_fn=lambda config, scene: lambda p: evaluate(config, scene, p, None)[
-          'mean']['psnr'], evaluate=evaluate, render_views=render_views)
+      cheap_eval_fn=lambda config, scene: lambda p: evaluate(config, scene, p).mean['psnr'],
+      evaluate=evaluate, render_views=render_views)
   monkeypatch.setitem(backbones.BACKBONES, 'nerf', toy)
   config = tiny_config(num_rounds=2, max_steps=10)
   scene = load_scene(config)
@@ -214,6 +219,7 @@ def test_the_round_driver_runs_any_backbone_through_its_interface(tmp_path, monk
   on_disk = resume.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
   assert [c[2] for c in calls] == [True] * 3  # Trained into the round directories.
   np.testing.assert_array_equal(on_disk.params['colour'], state.params['colour'])
+  assert os.path.isfile(tmp_path / 'run' / 'round_2' / 'eval' / 'test_000.png')  # the edge
   again = resume.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
   assert len(calls) == 3  # Finished rounds are loaded through init_params, not retrained.
   np.testing.assert_array_equal(again.params['colour'], state.params['colour'])
@@ -234,10 +240,11 @@ def test_backbone_is_validated_and_the_nerf_renders_rgb_depth_acc():
   h, w = scene.height, scene.width
   assert out['rgb'].shape == (2, h, w, 3) and out['depth'].shape == (2, h, w)
   assert out['acc'].shape == (2, h, w) and np.all((out['acc'] >= 0) & (out['acc'] <= 1))
-  ev = backbone.evaluate(config, scene, params, None, show_progress=False)
+  ev = backbone.evaluate(config, scene, params, show_progress=False)
   first = np.clip(out['rgb'][0], 0., 1.)
   psnr = -10. * np.log10(np.mean((first - scene.images[scene.test_idx[0]])**2))
-  np.testing.assert_allclose(ev['per_image'][0]['psnr'], psnr, rtol=1e-4)
+  np.testing.assert_allclose(ev.per_image[0]['psnr'], psnr, rtol=1e-4)
+  np.testing.assert_array_equal(ev.images[0], first)  # the render it was scored on
 
 
 def test_synthesis_by_rendering_masks_with_one_minus_acc_only():

@@ -10,7 +10,8 @@ from conftest import tiny_config, tree_files
 from experiments import sharing
 from renerf_jax import resume, rundir
 from renerf_jax.datasets import load_scene
-from renerf_jax.pseudo_views import load_pseudo_views, pseudo_view_poses
+from renerf_jax.outputs import load_pseudo_views
+from renerf_jax.pseudo_views import pseudo_view_poses
 
 
 def test_sharing_rules_derive_from_the_config_field_categories():

@@ -5,7 +5,8 @@ pseudo-view window, from the real and the pseudo-views together (the pseudo-view
 the real views as images drawn uniformly"); the loss is (1 - l) L1 + l (1 - SSIM) with
 per-pixel masks; per-parameter Adam learning rates (the position's decayed exponentially
 and scaled by the scene extent); the SH degree raised every `gs_sh_interval_frac` of the
-run; adaptive density control (density.py) between steps. `train_gaussians` mirrors
+run (schedule.py); adaptive density control (density.py) between steps; the loss of
+loss.py. `train_gaussians` mirrors
 `renerf_jax.training.train_model` at the edges: atomic checkpoints, bit-for-bit resume,
 the JSONL log, the evaluation curve and the progress bar.
 
@@ -24,20 +25,19 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from renerf_jax import metrics, regularizers, rundir
+from renerf_jax import metrics, rundir
 from renerf_jax.errors import DataError
 from renerf_jax.gaussians import density
 from renerf_jax.gaussians import params as params_lib
 from renerf_jax.gaussians import render as render_lib
+from renerf_jax.gaussians.loss import image_loss
+from renerf_jax.gaussians.schedule import (densify_schedule, make_optimizer, means_lr,
+                                           set_means_lr, sh_degree_at)
 from renerf_jax.progress import progress_bar
 from renerf_jax.training import TrainResult
 
-ADAM_EPS = 1e-15  # 3DGS's Adam epsilon.
 NEAR = 0.2  # Gaussians nearer than this depth are culled (the reference's frustum test).
 TILE = 16
-# Optimised fields: the Gaussians' float fields with the SH split into DC and the rest
-# (their learning rates differ).
-FIELDS = ('means', 'log_scales', 'quats', 'opacity_logits', 'sh_dc', 'sh_rest')
 
 
 @flax.struct.dataclass
@@ -137,69 +137,6 @@ def scene_extent(config, scene):
   return radius if radius > 0 else 1.
 
 
-# ------------------------------------------------------------------------- schedules
-
-
-def means_lr(iteration, config, extent):
-  """Position lr at a 1-based iteration: extent x log-linear gs_lr_means_init -> _final
-  over max_steps (3DGS's get_expon_lr_func without delay)."""
-  return extent * regularizers.log_lerp(iteration, config.gs_lr_means_init,
-                                        config.gs_lr_means_final, config.max_steps)
-
-
-def base_learning_rates(config, extent):
-  """{field: lr} at the start (the position lr is then set every step)."""
-  return {'means': extent * config.gs_lr_means_init, 'log_scales': config.gs_lr_scales,
-          'quats': config.gs_lr_quats, 'opacity_logits': config.gs_lr_opacity,
-          'sh_dc': config.gs_lr_sh_dc, 'sh_rest': config.gs_lr_sh_rest}
-
-
-def steps_of(frac, config, minimum=0):
-  """round(frac * max_steps), at least `minimum`."""
-  return max(int(round(frac * config.max_steps)), minimum)
-
-
-def sh_interval(config):
-  return steps_of(config.gs_sh_interval_frac, config, 1)
-
-
-def sh_degree_at(iteration, config):
-  """SH degree at a 1-based iteration: +1 every sh_interval iterations, at most 3 (works
-  on Python ints and traced arrays)."""
-  return jnp.minimum(iteration // sh_interval(config), 3)
-
-
-def densify_schedule(config):
-  """(from, until, every, opacity_reset_every) in steps."""
-  return (steps_of(config.gs_densify_from_frac, config),
-          steps_of(config.gs_densify_until_frac, config),
-          steps_of(config.gs_densify_every_frac, config, 1),
-          steps_of(config.gs_opacity_reset_every_frac, config, 1))
-
-
-def make_optimizer(config, extent):
-  """Per-field Adam (optax.multi_transform), 3DGS's learning rates, eps 1e-15.
-
-  Each group's lr is an injected hyperparameter; train_step sets the position's from the
-  step (set_means_lr), so the decay follows the step even across skipped updates.
-  """
-  lrs = base_learning_rates(config, extent)
-  groups = {k: optax.inject_hyperparams(optax.adam)(learning_rate=lrs[k], eps=ADAM_EPS)
-            for k in FIELDS}
-  return optax.multi_transform(groups, {k: k for k in FIELDS})
-
-
-def set_means_lr(opt_state, lr):
-  """The multi_transform state with the position group's learning rate set to lr."""
-  masked = opt_state.inner_states['means']
-  inject = masked.inner_state
-  hp = dict(inject.hyperparams, learning_rate=jnp.asarray(
-      lr, inject.hyperparams['learning_rate'].dtype))
-  inner = dict(opt_state.inner_states, means=masked._replace(
-      inner_state=inject._replace(hyperparams=hp)))
-  return opt_state._replace(inner_states=inner)
-
-
 def strong_types(tree):
   """Copies of a pytree's arrays without weak types (params.random_init's opacities
   are weakly typed; a step's outputs are not, and a change would recompile the step)."""
@@ -218,79 +155,6 @@ def init_state(config, params, extent) -> GaussianTrainState:
 
 
 # ------------------------------------------------------------------------- loss, step
-
-
-def _blur_valid(x, taps):
-  """Separable 'valid' filtering of [H, W, C] by `taps` along H and W."""
-  for axis in (0, 1):
-    n_out = x.shape[axis] - len(taps) + 1
-    x = sum(float(w) * jax.lax.slice_in_dim(x, k, k + n_out, axis=axis)
-            for k, w in enumerate(taps))
-  return x
-
-
-def masked_ssim_map(img0, img1, mask):
-  """SSIM map of metrics.ssim_map (11x11 Gaussian window, sigma 1.5, 'valid') whose
-  local statistics are weighted by a pixel mask: a pixel of weight 0 enters no window.
-
-  Each window's means, variances and covariance are mask-weighted averages (normalised
-  by the window's mask weight); with an all-ones mask this is metrics.ssim_map. Windows
-  centred on a pixel of weight 0 are excluded (weight 0 and no gradient, even where the
-  rest of the window is masked too).
-
-  Args:
-    img0, img1: [H, W, 3] (H, W >= 11). mask: [H, W] weights in [0, 1].
-
-  Returns:
-    (ssim [H - 10, W - 10, 3], weight [H - 10, W - 10, 1]: the centre pixels' mask).
-  """
-  taps = metrics.gaussian_kernel_1d(metrics.SSIM_FILTER_SIZE, metrics.SSIM_FILTER_SIGMA)
-  r = (len(taps) - 1) // 2
-  m = mask[..., None]
-  centre = m[r:m.shape[0] - r, r:m.shape[1] - r]
-  use = centre > 0.
-  bm = _blur_valid(m, taps)
-  safe = lambda x, fill: jnp.where(use, x, fill)
-  norm = safe(bm, 1.)
-
-  def avg(x):  # Mask-weighted local mean; constants outside `use` (no gradient there).
-    return safe(_blur_valid(m * x, taps), 0.) / norm
-
-  mu0, mu1 = avg(img0), avg(img1)
-  s00 = jnp.maximum(0., avg(img0**2) - mu0**2)
-  s11 = jnp.maximum(0., avg(img1**2) - mu1**2)
-  s01 = avg(img0 * img1) - mu0 * mu1
-  c1, c2 = metrics.SSIM_K1**2, metrics.SSIM_K2**2
-  ssim = ((2. * mu0 * mu1 + c1) * (2. * s01 + c2) /
-          ((mu0**2 + mu1**2 + c1) * (s00 + s11 + c2)))
-  return ssim, centre
-
-
-def image_loss(rgb, target, mask, lambda_dssim):
-  """(1 - l) L1 + l (1 - SSIM) of a rendered image, pixels weighted by a mask.
-
-  L1 = mean(m |rgb - target|) over all pixels and channels; 1 - SSIM = the mean over
-  the SSIM map of w (1 - SSIM) (masked_ssim_map: a pixel of weight 0 enters no window,
-  and windows centred on one count 0). A pixel of weight 0 thus enters neither term nor
-  any gradient, whatever its rendered or target colour; an all-zero mask gives loss 0
-  and zero gradients. Pixels keep the weight of a real view's pixels (no
-  renormalisation by the mask's sum), as a pseudo-view's usable pixels join the
-  training pixels.
-
-  Args:
-    rgb, target: [H, W, 3] (H, W >= 11). mask: [H, W] weights in [0, 1].
-    lambda_dssim: weight of the SSIM term.
-
-  Returns:
-    (loss, masked MSE) scalars; the MSE is sum(m (rgb - target)^2) / (3 sum(m)).
-  """
-  m = mask[..., None]
-  l1 = jnp.mean(m * jnp.abs(rgb - target))
-  ssim, weight = masked_ssim_map(rgb, target, mask)
-  dssim = jnp.sum(weight * (1. - ssim)) / ssim.size
-  loss = (1. - lambda_dssim) * l1 + lambda_dssim * dssim
-  mse = jnp.sum(m * (rgb - target)**2) / jnp.maximum(3. * jnp.sum(m), 1e-8)
-  return loss, mse
 
 
 def sh_mask(degree):
