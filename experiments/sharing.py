@@ -24,7 +24,7 @@ import shutil
 import jax
 import numpy as np
 
-from renerf_jax import laplace, renerf, report, rundir
+from renerf_jax import laplace, pseudo_views, renerf, report, rundir
 from renerf_jax.backbones import get_backbone
 from renerf_jax.configs import config_differences, fields_where
 from renerf_jax.resume import round_dir
@@ -105,40 +105,57 @@ VIEW_CACHE_BYTES = 1 << 30  # About 2000 views at 252x189, 470 at 504x378.
 
 
 class ViewCache:
-  """Rendered pseudo-views keyed on (config without RENDER_IRRELEVANT, params, rays)."""
+  """Rendered pseudo-views keyed on (config without RENDER_IRRELEVANT, params, rays).
+
+  Called as pseudo_views.render_pseudo_views' render_fn: a view rendered before in this
+  process comes back bit for bit with the seconds its render took; `hits` and `misses`
+  count the calls of each kind.
+  """
 
   def __init__(self, max_bytes=VIEW_CACHE_BYTES):
     self.cache = LruCache(max_bytes=max_bytes)
+    self.hits = self.misses = 0
 
   @staticmethod
   def key(config, params, rays):
     return digest(config_key(config, RENDER_IRRELEVANT), params, rays)
 
-  def lookup(self, config, params, rays):
-    return self.cache.get(self.key(config, params, rays))
-
-  def store(self, config, params, rays, image, seconds):
-    self.cache.put(self.key(config, params, rays), (image, seconds))
+  def __call__(self, config, params, rays):
+    """(rgb [H * W, 3], seconds of the render that made it)."""
+    key = self.key(config, params, rays)
+    hit = self.cache.get(key)
+    if hit is not None:
+      self.hits += 1
+      return hit[0].copy(), hit[1]
+    self.misses += 1
+    rgb, seconds = pseudo_views.render_view(config, params, rays)
+    self.cache.put(key, (rgb.copy(), seconds))
+    return rgb, seconds
 
 
 class HessianCache:
-  """Per-vertex sigma of the Hessian pass of the last HESSIAN_CACHE_SIZE baselines."""
+  """Per-vertex sigma of the Hessian pass of the last HESSIAN_CACHE_SIZE baselines.
+
+  Called as uncertainty.compute_masks' sigma_fn; `hits` and `misses` count the calls.
+  """
 
   def __init__(self, max_items=HESSIAN_CACHE_SIZE):
     self.cache = LruCache(max_items=max_items)
+    self.hits = self.misses = 0
 
   def __call__(self, config, params, train, lo, hi, chunk, show_progress=False):
-    """uncertainty.compute_masks' sigma_fn: (sigma [V], seconds of the pass that
-    computed it, whether it came from the cache)."""
+    """(sigma [V], seconds of the pass that computed it)."""
     key = digest(config_key(config, HESSIAN_IRRELEVANT), np.int64(chunk), params, train,
                  lo, hi)
     hit = self.cache.get(key)
     if hit is not None:
-      return hit[0], hit[1], True
+      self.hits += 1
+      return hit
+    self.misses += 1
     sigma, seconds = laplace.vertex_sigma_pass(config, params, train, lo, hi, chunk,
                                                show_progress)
     self.cache.put(key, (sigma, seconds))
-    return sigma, seconds, False
+    return sigma, seconds
 
 
 VIEW_CACHE = ViewCache()
@@ -151,7 +168,7 @@ def memo_synthesize(config, scene, params, show_progress=False):
   if config.backbone != 'nerf':
     return get_backbone(config).synthesize(config, scene, params, show_progress)
   return renerf.synthesize(config, scene, params, show_progress, sigma_fn=HESSIAN_CACHE,
-                           view_cache=VIEW_CACHE)
+                           render_fn=VIEW_CACHE)
 
 
 # --------------------------------------------------------------- copies between runs

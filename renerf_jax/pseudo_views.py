@@ -131,7 +131,22 @@ def random_target_poses(config, scene):
   return random_poses.random_poses_sphere(train, config.pseudo_n_random, rng)
 
 
-def render_pseudo_views(config, scene, params, poses, show_progress=True, view_cache=None):
+def render_view(config, params, rays):
+  """One view's colours and the seconds the render took: render_pseudo_views' default
+  render_fn.
+
+  Args:
+    config: Config. params: model B. rays: Rays of one view, flat [H * W, ...].
+
+  Returns:
+    (rgb [H * W, 3] float32 clipped to [0, 1], wall seconds).
+  """
+  t0 = time.perf_counter()
+  rgb = np.clip(np.asarray(render_flat(config, params, rays)['rgb'], np.float32), 0., 1.)
+  return rgb, time.perf_counter() - t0
+
+
+def render_pseudo_views(config, scene, params, poses, show_progress=True, render_fn=None):
   """Renders model `params` at `poses`; all pixels valid (masks of ones).
 
   Each view's rays are made and rendered on their own (they start a chunk), so a view's
@@ -139,45 +154,39 @@ def render_pseudo_views(config, scene, params, poses, show_progress=True, view_c
 
   Args:
     config: Config. scene: Scene (camera). params: model B. poses: [M, 3, 4].
-    show_progress: draw a progress bar over rays.
-    view_cache: optional cache of rendered views, an object with
-      lookup(config, params, rays) -> (image, seconds it took) or None, and
-      store(config, params, rays, image, seconds); experiments/sharing.py keeps one for
-      the variants of a table whose view sets overlap (7x holds 5x, 3x_b and 3x_c).
+    show_progress: draw a progress bar over views.
+    render_fn: (config, params, rays of one view) -> (rgb [H * W, 3] in [0, 1], the
+      seconds it costs); None: render_view. (experiments/sharing.py passes one that
+      renders each distinct view once per process and reports the seconds of that
+      render.)
 
   Returns:
-    (PseudoViews, info: {'rendered_views', 'cached_views', 'cached_seconds': the render
-    seconds the cached views took when they were rendered}).
+    (PseudoViews, info: {'render_seconds': the wall time of this call, each view's
+    render counted with the seconds render_fn reports for it}).
   """
+  t0 = time.perf_counter()
   m, h, w = len(poses), scene.height, scene.width
+  render_fn = render_fn or render_view
   images = np.zeros((m, h, w, 3), np.float32)
-  todo, cached_seconds = [], 0.
+  reported = measured = 0.
+  bar = progress_bar(total=m, unit='view', disable=not show_progress,
+                     desc=f'pseudo-views ({m})')
   for i in range(m):
     # One pose at a time: batched ray generation differs in the last bit between batches.
     rays = camera_rays(scene, None, poses[i:i + 1])
     view = jax.tree_util.tree_map(lambda v: np.asarray(v).reshape((h * w,) + v.shape[3:]),
                                   rays)
-    hit = None if view_cache is None else view_cache.lookup(config, params, view)
-    if hit is None:
-      todo.append((i, view))
-    else:
-      images[i] = hit[0]
-      cached_seconds += hit[1]
-  bar = progress_bar(total=len(todo) * h * w, unit='ray', disable=not show_progress,
-                     desc=f'pseudo-views ({len(todo)} of {m}, {m - len(todo)} cached)')
-  for i, view in todo:
-    t0 = time.perf_counter()
-    out = render_flat(config, params, view)
-    images[i] = np.clip(out['rgb'], 0., 1.).reshape(h, w, 3)
-    if view_cache is not None:
-      view_cache.store(config, params, view, images[i].copy(), time.perf_counter() - t0)
-    bar.update(h * w)
+    t_view = time.perf_counter()
+    rgb, s = render_fn(config, params, view)
+    measured += time.perf_counter() - t_view
+    reported += float(s)
+    images[i] = np.asarray(rgb, np.float32).reshape(h, w, 3)
+    bar.update(1)
   bar.close()
   pv = PseudoViews(images=images, poses=np.asarray(poses),
                    masks=np.ones((m, h, w), np.float32),
                    uncertainty=np.zeros((m, h, w), np.float32))
-  return pv, {'rendered_views': len(todo), 'cached_views': m - len(todo),
-              'cached_seconds': cached_seconds}
+  return pv, {'render_seconds': time.perf_counter() - t0 - measured + reported}
 
 
 def uncertainty_heatmap(u, ref=None):

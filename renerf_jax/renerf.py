@@ -82,7 +82,7 @@ def make_pools(config, scene, pseudo: Optional[PseudoViews]):
   return pools
 
 
-def synthesize(config, scene, params, show_progress=False, sigma_fn=None, view_cache=None):
+def synthesize(config, scene, params, show_progress=False, sigma_fn=None, render_fn=None):
   """Pseudo-views of model `params`, with uncertainty masks if config.use_masks.
 
   With masks, the Hessian pass runs first and the colours and the uncertainty of the
@@ -91,29 +91,29 @@ def synthesize(config, scene, params, show_progress=False, sigma_fn=None, view_c
   Args:
     config, scene: Config and Scene. params: model B.
     show_progress: draw progress bars.
-    sigma_fn: the Hessian pass (uncertainty.compute_masks' sigma_fn; None: computed).
-    view_cache: a cache of rendered views (pseudo_views.render_pseudo_views; None: none).
+    sigma_fn: the Hessian pass (uncertainty.compute_masks' sigma_fn; None:
+      laplace.vertex_sigma_pass).
+    render_fn: renders one unmasked view (pseudo_views.render_pseudo_views' render_fn;
+      None: pseudo_views.render_view).
 
   Returns:
     (PseudoViews, timing: {'seconds': total; 'render_seconds'; with masks
-    'hessian_seconds', 'hessian_cached', 'mu', 'kept_fraction'; without, the view-cache
-    counts}, meta: a description of each view). Work taken from a cache counts in
-    `seconds` with the seconds it took when it was done, so sharing never makes a round
-    look cheaper.
+    'hessian_seconds', 'mu', 'kept_fraction'}, meta: a description of each view). The
+    Hessian pass and each view's render count with the seconds sigma_fn / render_fn
+    report for them: a function that reuses earlier work reports what that work cost, so
+    sharing work never makes a round look cheaper.
   """
   if config.pseudo_source == 'photo':
     return pseudo_views.photo_pseudo_views(config, scene)
   t0 = time.perf_counter()
   poses, meta = pseudo_view_poses(config, scene)
+  pose_seconds = time.perf_counter() - t0
   if config.use_masks:
     pv, timing = masked_pseudo_views(config, scene, params, poses, show_progress, sigma_fn)
   else:
-    pv, timing = render_pseudo_views(config, scene, params, poses, show_progress, view_cache)
-    timing['render_seconds'] = time.perf_counter() - t0
-  timing['seconds'] = time.perf_counter() - t0
-  if timing.get('hessian_cached'):
-    timing['seconds'] += timing['hessian_seconds']
-  timing['seconds'] += timing.get('cached_seconds', 0.)
+    pv, timing = render_pseudo_views(config, scene, params, poses, show_progress, render_fn)
+  timing['seconds'] = (pose_seconds + timing['render_seconds'] +
+                       timing.get('hessian_seconds', 0.))
   return pv, timing, meta
 
 
@@ -121,7 +121,9 @@ def masked_pseudo_views(config, scene, params, poses, show_progress=False, sigma
   """Pseudo-views at `poses` with Laplace-uncertainty masks (pixels with U > mu masked).
 
   Returns:
-    (PseudoViews with masks and uncertainty, timing dict).
+    (PseudoViews with masks and uncertainty, timing: {'render_seconds': the wall time
+    of all but the Hessian pass, 'hessian_seconds': the pass's as sigma_fn reports
+    them, 'mu', 'kept_fraction'}).
   """
   from renerf_jax import uncertainty  # pylint: disable=g-import-not-at-top
   t0 = time.perf_counter()
@@ -129,16 +131,17 @@ def masked_pseudo_views(config, scene, params, poses, show_progress=False, sigma
   # Config.contraction (as Bayes' Rays does on unbounded scenes), else the scene box.
   lo, hi = contraction.CONTRACTED_BOX if config.contraction else scene.bbox
   rays = camera_rays(scene, None, poses)
-  res = uncertainty.compute_masks(config, params, ray_pool(scene, scene.train_idx)['rays'],
-                                  rays, np.asarray(lo), np.asarray(hi),
-                                  show_progress=show_progress, sigma_fn=sigma_fn)
-  total = time.perf_counter() - t0
+  train_rays = ray_pool(scene, scene.train_idx)['rays']
+  t_masks = time.perf_counter()
+  res = uncertainty.compute_masks(config, params, train_rays, rays, np.asarray(lo),
+                                  np.asarray(hi), show_progress=show_progress,
+                                  sigma_fn=sigma_fn)
+  masks_wall = time.perf_counter() - t_masks
   pv = PseudoViews(images=np.clip(res.rgb, 0., 1.), poses=np.asarray(poses),
                    masks=np.asarray(res.mask, np.float32),
                    uncertainty=np.asarray(res.uncertainty, np.float32))
-  render_seconds = total - (0. if res.hessian_cached else res.hessian_seconds)
+  render_seconds = time.perf_counter() - t0 - masks_wall + res.render_seconds
   return pv, {'render_seconds': render_seconds, 'hessian_seconds': res.hessian_seconds,
-              'hessian_cached': res.hessian_cached,
               'mu': float(res.mu), 'kept_fraction': float(np.mean(pv.masks))}
 
 

@@ -12,6 +12,7 @@ Conventions:
   * Masks: 1 keeps a pixel (U <= mu), 0 masks it (U > mu).
 """
 import functools
+import time
 from typing import Callable, NamedTuple, Optional, Tuple
 
 import jax
@@ -192,15 +193,8 @@ def render_signal(config, params, rays, show_progress=False, desc='uncertainty')
 # --------------------------------------------------------------- pseudo-view masks
 
 # The Hessian pass of compute_masks: (config, params, train_rays, lo, hi, chunk,
-# show_progress) -> (sigma [V], seconds, cached).
-SigmaFn = Callable[..., Tuple[jnp.ndarray, float, bool]]
-
-
-def _uncached_sigma(config, params, train_rays, lo, hi, chunk, show_progress=False):
-  """laplace.vertex_sigma_pass as a sigma_fn: (sigma, seconds, cached=False)."""
-  sigma, seconds = laplace.vertex_sigma_pass(config, params, train_rays, lo, hi, chunk,
-                                             show_progress)
-  return sigma, seconds, False
+# show_progress) -> (sigma [V], seconds the pass costs), as laplace.vertex_sigma_pass.
+SigmaFn = Callable[..., Tuple[jnp.ndarray, float]]
 
 
 class Masks(NamedTuple):
@@ -209,8 +203,8 @@ class Masks(NamedTuple):
   mask: np.ndarray  # [...] 1 keeps a pixel, 0 masks it.
   mu: float  # The threshold.
   rgb: np.ndarray  # [..., 3] the fine colour, rendered in the same pass as U.
-  hessian_seconds: float  # Wall time of the Hessian pass (of the first, when cached).
-  hessian_cached: bool = False  # The pass was shared (compute_masks' sigma_fn said so).
+  hessian_seconds: float  # The Hessian pass's seconds, as its sigma_fn reports them.
+  render_seconds: float  # Wall time of everything else: the render, U and the threshold.
 
 
 def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
@@ -234,25 +228,27 @@ def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
     hessian_chunk: rays per chunk of the Hessian pass (default config.hessian_chunk).
     show_progress: draw bars over the Hessian rays and the pseudo rays.
     sigma_fn: the Hessian pass, (config, params, train_rays, lo, hi, chunk,
-      show_progress) -> (sigma [V], seconds, cached: bool), e.g. a memoised
-      laplace.vertex_sigma_pass shared by variants of one baseline (None:
-      laplace.vertex_sigma_pass, never cached).
+      show_progress) -> (sigma [V], the seconds it costs) (None:
+      laplace.vertex_sigma_pass, which reports its wall time; another implementation
+      reports what its result cost to compute, which Masks.hessian_seconds carries).
 
   Returns:
     Masks.
   """
+  t0 = time.perf_counter()
   flat = lambda r: jax.tree_util.tree_map(lambda x: x.reshape((-1, x.shape[-1])), r)
   shape = pseudo_rays.origins.shape[:-1]
+  pass_wall = 0.
   desc = f'pseudo-views + uncertainty ({shape[0]})' if len(shape) == 3 else 'uncertainty'
   if config.mask_signal != 'laplace':  # Hessian-free: no Hessian pass at all.
     u, rgb = render_signal(config, params, flat(pseudo_rays), show_progress, desc)
-    hessian_seconds, cached = 0., False
+    hessian_seconds = 0.
   else:
     train = laplace.subsample_rays(flat(train_rays), config.hessian_rays, config.seed)
-    if sigma_fn is None:
-      sigma_fn = _uncached_sigma
-    sigma, hessian_seconds, cached = sigma_fn(
+    t_pass = time.perf_counter()
+    sigma, hessian_seconds = (sigma_fn or laplace.vertex_sigma_pass)(
         config, params, train, lo, hi, hessian_chunk or config.hessian_chunk, show_progress)
+    pass_wall = time.perf_counter() - t_pass
     u, rgb = render_uncertainty(config, params, sigma, flat(pseudo_rays), lo, hi,
                                 chunk=config.render_chunk,
                                 u_bg=laplace.prior_sigma(config.hessian_lambda),
@@ -263,5 +259,5 @@ def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
     mu = threshold_for_keep_fraction(u, config.mask_keep_frac)
   mask = np.asarray(masks_from_uncertainty(u, mu))
   return Masks(uncertainty=u.reshape(shape), mask=mask.reshape(shape), mu=float(mu),
-               rgb=rgb.reshape(shape + (3,)), hessian_seconds=hessian_seconds,
-               hessian_cached=cached)
+               rgb=rgb.reshape(shape + (3,)), hessian_seconds=float(hessian_seconds),
+               render_seconds=time.perf_counter() - t0 - pass_wall)

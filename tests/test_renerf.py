@@ -282,3 +282,16 @@ def test_gaussian_configs_load_with_rounds_and_refuse_the_laplace_masks_up_front
   config = tiny_config(backbone='gaussians', num_rounds=1, use_masks=True)
   with pytest.raises(ConfigError, match='one_minus_acc'):
     renerf.check_rounds_config(config, load_scene(config))  # Before B trains.
+
+
+def test_synthesis_charges_the_seconds_its_render_and_hessian_functions_report():
+  """A render_fn / sigma_fn that reuses earlier work reports what the work cost; the
+  round's synthesis seconds count that, never less (sharing never makes a round look
+  cheaper)."""
+  config = tiny_config(interp_factors='0.5')  # 2 views on 3 training views
+  scene = load_scene(config)
+  h, w = scene.height, scene.width
+  fake = lambda cfg, params, rays: (np.full((h * w, 3), .25, np.float32), 100.)
+  pv, timing, _ = renerf.synthesize(config, scene, None, render_fn=fake)
+  assert pv.images.shape == (2, h, w, 3) and np.all(pv.images == .25)
+  assert timing['render_seconds'] >= 200. and timing['seconds'] >= timing['render_seconds']

@@ -74,18 +74,18 @@ def test_compute_masks_takes_the_hessian_pass_from_sigma_fn(setup):
                                hessian_lambda=LAM, mask_keep_frac=0.5, render_chunk=64)
   pseudo = take(pool['rays'], np.arange(1, 600, 7))
   plain = unc.compute_masks(config, params, pool['rays'], pseudo, -1., 1., hessian_chunk=8)
-  assert not plain.hessian_cached
+  assert plain.hessian_seconds > 0. and plain.render_seconds > 0.
   calls = []
 
   def sigma_fn(cfg, prm, train, lo, hi, chunk, show_progress):
     calls.append((train.origins.shape, chunk, show_progress))
     sigma, _ = laplace.vertex_sigma_pass(cfg, prm, train, lo, hi, chunk, show_progress)
-    return sigma, 12.5, True
+    return sigma, 12.5
 
   res = unc.compute_masks(config, params, pool['rays'], pseudo, -1., 1., hessian_chunk=8,
                           sigma_fn=sigma_fn)
   assert calls == [((24, 3), 8, False)]
-  assert res.hessian_cached and res.hessian_seconds == 12.5
+  assert res.hessian_seconds == 12.5  # the seconds sigma_fn reports, not its wall time
   np.testing.assert_array_equal(res.uncertainty, plain.uncertainty)
   np.testing.assert_array_equal(res.mask, plain.mask)
   np.testing.assert_array_equal(res.rgb, plain.rgb)
@@ -101,7 +101,7 @@ def test_hessian_free_masks_skip_the_hessian_pass(setup, signal, monkeypatch):
   pseudo = take(pool['rays'], np.arange(0, 600, 3))
   res = unc.compute_masks(config, params, pool['rays'], pseudo, -1., 1.,
                           sigma_fn=lambda *a: pytest.fail('sigma_fn called'))
-  assert res.hessian_seconds == 0. and not res.hessian_cached
+  assert res.hessian_seconds == 0. and res.render_seconds > 0.
   # U is the signal of one plain render, the colours are that render's.
   plain = render_flat(config, params, pseudo)
   np.testing.assert_allclose(res.rgb, plain['rgb'], atol=1e-6)
