@@ -15,7 +15,7 @@ is shared). Timings do not depend on the parameter values, so the field is fresh
 initialised. Writes <out>.json and <out>.md:
 
   python -m benchmarks.bench_hessian --configs experiments/configs/table_converged2.gin \
-      gin_configs/llff3_10min.gin --rays 8883 16384 --out benchmarks/results/hessian_stop26
+      experiments/configs/llff3_10min.gin --rays 8883 16384 --out benchmarks/results/hessian_stop26
 """
 import argparse
 import dataclasses

@@ -25,7 +25,7 @@ Time to quality (issue 21), 10 minutes on full-resolution fern, old against new 
 with idle-CPU rates from bench_throughput:
 
   python -m experiments.compare_equal_time --name fern_10min --base gin_configs/llff3_fast.gin \
-    --budget_s 600 --method 'llff3_fast=' --method 'llff3_10min=gin_configs/llff3_10min.gin' \
+    --budget_s 600 --method 'llff3_fast=' --method 'llff3_10min=experiments/configs/llff3_10min.gin' \
     --sec_per_step llff3_10min=0.192 --sec_per_step llff3_fast=0.709 \
     --seeds 0 1 2 --seeds_of llff3_fast=0
 """
