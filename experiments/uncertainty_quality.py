@@ -15,7 +15,7 @@ Writes <out>/<name>.json and .md (per scene x variant: AUSE, AURG, mask lift at
 Config.mask_keep_frac, Hessian and render seconds; means over scenes; per-seed values;
 the targets of the issue for the best variant), <out>/<name>_<scene>.png (sparsification
 curves of all variants, the oracle and random) and <out>/<name>_<scene>_panel.png
-(pseudo-view | U | masked view for the best variant and for 'ours'; test view | U |
+(pseudo-view | U | masked view for the best variant and for 'laplace'; test view | U |
 error). Six scenes, two seeds, the hour-budget config:
 
   python -m experiments.uncertainty_quality --name uq_tiny \
@@ -43,7 +43,8 @@ from renerf_jax.uncertainty import threshold_for_keep_fraction
 # The embedded scene at the table config's image size (126 x 94), rendered directly.
 PROCEDURAL = ["Config.dataset_loader = 'procedural'", 'Config.procedural_size = (94, 126)',
               'Config.image_downsample = 1']
-SIGNALS_VERSION = 1  # Bump when a signal's definition changes (cached signals are redone).
+SIGNALS_VERSION = 2  # Bump when a signal's definition or name changes (cached signals
+# are redone; 2: 'ours' became 'laplace').
 
 
 def parser():
@@ -146,7 +147,7 @@ def summarize(runs):
   """Rows per (scene, variant) over seeds, means over scenes, the best variant, targets."""
   rows, scenes = [], list(dict.fromkeys(r['scene'] for r in runs))
   keys = ['ause', 'aurg', 'lift']
-  if any('depth_ause' in r['variants']['ours'] for r in runs):
+  if any('depth_ause' in r['variants']['laplace'] for r in runs):
     keys += ['depth_ause', 'depth_aurg', 'depth_lift']
   for sc in scenes:
     rs = [r for r in runs if r['scene'] == sc]
@@ -230,7 +231,7 @@ def markdown(name, rows, means, best, targets, keep_frac, invocations):
 def plot_curves(runs, scene, path):
   rs = [r for r in runs if r['scene'] == scene]
   kinds = [('', 'RGB squared error')] + (
-      [('depth_', '|depth error|')] if 'depth_curve' in rs[0]['variants']['ours'] else [])
+      [('depth_', '|depth error|')] if 'depth_curve' in rs[0]['variants']['laplace'] else [])
   fig, axes = report.subplots(1, len(kinds), figsize=(6 * len(kinds), 4.2))
   x = uq.DEFAULT_FRACTIONS
   for ax, (p, title) in zip(axes[0], kinds):
@@ -238,7 +239,7 @@ def plot_curves(runs, scene, path):
       c = np.mean([r['variants'][v][p + 'curve'] for r in rs], axis=0)
       ause = np.mean([r['variants'][v][p + 'ause'] for r in rs])
       ax.plot(x, c, ls='--' if v in us.HESSIAN_FREE else '-', label=f'{v} ({ause:.3f})')
-    ax.plot(x, np.mean([r['variants']['ours'][p + 'oracle'] for r in rs], axis=0), 'k',
+    ax.plot(x, np.mean([r['variants']['laplace'][p + 'oracle'] for r in rs], axis=0), 'k',
             lw=2, label='oracle')
     ax.axhline(1., color='gray', ls=':', label='random')
     ax.set_xlabel('fraction of pixels removed (most uncertain first)')
@@ -301,7 +302,7 @@ def main(argv=None):
       'command': command, 'invocations': invocations})
   md = markdown(args.name, rows, means, best, targets, keep_frac, invocations)
   report.write_markdown(os.path.join(args.out, args.name + '.md'), md)
-  panel_variants = [best] + (['ours'] if best != 'ours' else [])
+  panel_variants = [best] + (['laplace'] if best != 'laplace' else [])
   for sc in dict.fromkeys(args.scenes):
     plot_curves(runs, sc, os.path.join(args.out, f'{args.name}_{sc}.png'))
     seed = min(r['seed'] for r in runs if r['scene'] == sc)

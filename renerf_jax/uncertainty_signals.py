@@ -1,10 +1,10 @@
 """Per-pixel uncertainty signals of a trained NeRF B, all from one render along the rays.
 
 The variants that renerf_jax.uncertainty_quality compares (VARIANTS):
-  * ours: what uncertainty.compute_masks renders today: per-vertex sigma (laplace.
-    vertex_sigma) of the Hessian over config.hessian_rays training rays drawn with
-    config.seed, U = sum_i w_i trilinear(sigma, x_i) + (1 - acc) prior_sigma(lambda).
-  * ours_all_rays: the same with the Hessian over all training rays.
+  * laplace: what uncertainty.compute_masks renders with Config.mask_signal='laplace':
+    per-vertex sigma (laplace.vertex_sigma) of the Hessian over config.hessian_rays
+    training rays drawn with config.seed, U = sum_i w_i trilinear(sigma, x_i) + (1 - acc) prior_sigma(lambda).
+  * laplace_all_rays: the same with the Hessian over all training rays.
   * bayes_rays: Bayes' Rays as released, over all training rays: one scalar per vertex,
     H_v = sum_axes mean_r diag(J_r^T J_r)_v + 1e-4 / (2^L)^3, variance 1 / H_v; at a
     sample the variance is interpolated with the squared normalised trilinear weights
@@ -21,7 +21,7 @@ Every U is larger where B is less certain.
 Hessian conventions: laplace.hessian_diagonal's pass (coarse and fine levels both count,
 fine positions fixed w.r.t. the coarse weights) run with lambda = 0, halved: mean_jtj =
 (1 / R) sum_r sum_levels diag(J_r^T J_r) [V, 3], summed over the colour channels. Then
-ours' diag(H) = 2 mean_jtj + 2 lambda exactly as laplace.hessian_diagonal, and Bayes' Rays'
+laplace's diag(H) = 2 mean_jtj + 2 lambda exactly as laplace.hessian_diagonal, and Bayes' Rays'
 H_v = sum_axes mean_jtj (its "summed J^T J divided by the number of rays").
 Normalised weights of a ray whose weights sum to 0 are uniform (nothing seen: the
 entropy is log S, the depth variance that of the sample distances).
@@ -39,12 +39,12 @@ from renerf_jax.deformation import cells_of, trilinear, trilinear_corners
 from renerf_jax.model import materialize, render_rays
 from renerf_jax.rendering import render_flat
 
-VARIANTS = ('ours', 'ours_all_rays', 'bayes_rays', 'bayes_rays_subsample',
+VARIANTS = ('laplace', 'laplace_all_rays', 'bayes_rays', 'bayes_rays_subsample',
             'weight_entropy', 'depth_variance', 'one_minus_acc')
 HESSIAN_FREE = ('weight_entropy', 'depth_variance', 'one_minus_acc')
 # The Hessian pass behind each Hessian variant: 'subsample' or 'all_rays'.
-HESSIAN_OF = {'ours': 'subsample', 'bayes_rays_subsample': 'subsample',
-              'ours_all_rays': 'all_rays', 'bayes_rays': 'all_rays'}
+HESSIAN_OF = {'laplace': 'subsample', 'bayes_rays_subsample': 'subsample',
+              'laplace_all_rays': 'all_rays', 'bayes_rays': 'all_rays'}
 BR_PRIOR = 1e-4  # Bayes' Rays' prior precision, divided by (2^L)^3.
 BR_LOG10_MIN, BR_LOG10_MAX = -3., 6.  # Its clip of log10 std.
 
@@ -186,7 +186,7 @@ def mean_jtj(config, params, rays, lo, hi, chunk: int, show_progress: bool = Fal
   return jax.block_until_ready(0.5 * h), time.perf_counter() - t0
 
 
-def ours_sigma(jtj, lam: float):
+def laplace_sigma(jtj, lam: float):
   """laplace.vertex_sigma of diag(H) = 2 mean_jtj + 2 lambda.
 
   Args:
@@ -212,7 +212,7 @@ def bayes_rays_variance(jtj, log2_res: int):
 
 class Tables(NamedTuple):
   """The per-vertex tables of the Hessian variants (device arrays)."""
-  sigmas: Dict[str, jnp.ndarray]  # 'ours', 'ours_all_rays': [V] sigma.
+  sigmas: Dict[str, jnp.ndarray]  # 'laplace', 'laplace_all_rays': [V] sigma.
   variances: Dict[str, jnp.ndarray]  # 'bayes_rays', 'bayes_rays_subsample': [V] variance.
   u_bg: float  # Ours' background U: laplace.prior_sigma(lambda).
 
@@ -243,8 +243,8 @@ def hessian_tables(config, params, train_rays, lo, hi, show_progress: bool = Fal
     jtj_all, s_all = mean_jtj(config, params, flat, lo, hi, config.hessian_chunk,
                               show_progress)
   lam, res = config.hessian_lambda, config.deform_log2_res
-  tables = Tables(sigmas={'ours': ours_sigma(jtj_sub, lam),
-                          'ours_all_rays': ours_sigma(jtj_all, lam)},
+  tables = Tables(sigmas={'laplace': laplace_sigma(jtj_sub, lam),
+                          'laplace_all_rays': laplace_sigma(jtj_all, lam)},
                   variances={'bayes_rays': bayes_rays_variance(jtj_all, res),
                              'bayes_rays_subsample': bayes_rays_variance(jtj_sub, res)},
                   u_bg=laplace.prior_sigma(lam))

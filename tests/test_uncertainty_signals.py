@@ -102,7 +102,7 @@ def test_tables_reuse_laplace(setup):
   assert info['hessian_seconds']['all_rays'] > 0.
   sub = laplace.subsample_rays(pool['rays'], 24, config.seed)
   sigma, _ = laplace.vertex_sigma_pass(config, params, sub, -1., 1., 8)
-  np.testing.assert_array_equal(tables.sigmas['ours'], sigma)
+  np.testing.assert_array_equal(tables.sigmas['laplace'], sigma)
   h = laplace.hessian_diagonal(config, params, pool['rays'], -1., 1., 1, LAM, chunk=8)
   jtj_sum = np.sum((np.asarray(h, np.float64) - 2. * LAM) / 2., axis=-1)
   np.testing.assert_allclose(1. / np.asarray(tables.variances['bayes_rays'], np.float64),
@@ -122,8 +122,8 @@ def test_render_signals_matches_compute_masks(setup):
       assert out[name].shape == shape and np.all(np.isfinite(out[name])), name
     assert out['rgb'].shape == shape + (3,)
   out = us.render_signals(config, params, rays, -1., 1., tables)
-  np.testing.assert_allclose(out['ours'], masks.uncertainty, rtol=1e-5)
+  np.testing.assert_allclose(out['laplace'], masks.uncertainty, rtol=1e-5)
   np.testing.assert_allclose(out['rgb'], masks.rgb, atol=1e-5)
   for name in ('bayes_rays', 'bayes_rays_subsample'):
     assert np.all(out[name] >= 0.) and np.all(out[name] <= 1.)
-  assert np.ptp(out['ours_all_rays']) > 0.
+  assert np.ptp(out['laplace_all_rays']) > 0.
