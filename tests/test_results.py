@@ -113,3 +113,24 @@ def test_a_command_must_run_a_module_or_script_that_exists():
   # The scripts of the experiments package import it: they run with -m only.
   assert 'run it as python -m experiments.renerf_scenes' in command_problem(
       'file', 'experiments/renerf_scenes.py')
+
+
+def test_readme_commands_exist_and_their_configs_parse():
+  """The README's commands (set-up, reproduce each table, using it) name modules and
+  scripts that exist and configs that parse; its result links name folders that exist."""
+  readme = REPO / 'README.md'
+  cmds = commands(readme)
+  assert sum(how == '-m' for how, _, _ in cmds) >= 4, cmds
+  for how, target, args in cmds:
+    if how == '-m' and target == 'pytest':
+      continue
+    problem = command_problem(how, target)
+    assert problem is None, f'README.md: {problem}'
+    for gin in config_args(args):
+      path = gin if os.path.isabs(gin) else str(REPO / gin)
+      if not os.path.exists(path):
+        path = str(REPO / 'gin_configs' / gin)
+      load_config([path])
+  links = re.findall(r'\]\((experiments/results/[\w/]+)\)', readme.read_text())
+  assert links and all((REPO / link).is_dir() for link in links), links
+  assert len(readme.read_text().splitlines()) <= 120  # issue 35: read in two minutes
