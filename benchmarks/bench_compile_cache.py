@@ -13,6 +13,7 @@ markdown table to benchmarks/results/compile_cache (or --out).
 """
 import argparse
 import json
+import os
 import shlex
 import subprocess
 import sys
@@ -53,7 +54,8 @@ def run_child(args, cache_dir):
   cmd = [sys.executable, '-m', 'benchmarks.bench_compile_cache', '--child',
          '--config', args.config, '--cache_dir', cache_dir] + [
              f'--gin_bindings={b}' for b in args.gin_bindings]
-  out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
+  out = subprocess.run(cmd, capture_output=True, text=True, check=True,
+                       cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__)))).stdout
   return json.loads(out.strip().splitlines()[-1])
 
 

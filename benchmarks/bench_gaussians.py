@@ -25,7 +25,6 @@ from benchmarks.bench_throughput import time_calls
 from renerf_jax import report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax.gaussians import params as params_lib
 from renerf_jax.gaussians import training as gtrain
 from renerf_jax.renerf import make_pools
 

@@ -14,11 +14,11 @@ copied back):
 """
 import argparse
 import os
-import sys
 
 import imageio.v3 as iio
 import numpy as np
 
+from experiments import tables
 from renerf_jax import report, resume
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
@@ -69,7 +69,7 @@ def main():
   mean = {'run': 'mean'}
   for k in ('psnr', 'ssim', 'lpips_alex', 'best_psnr', 'train_s', 'steps_per_s'):
     mean[k] = float(np.mean([r[k] for r in rows]))
-  cmd = 'python -m experiments.run_summary ' + ' '.join(sys.argv[1:])
+  cmd = tables.command_line('experiments.run_summary')
   os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
   report.write_json(args.out + '.json', {'rows': rows, 'mean': mean, 'curves': curves,
                                          'command': cmd})

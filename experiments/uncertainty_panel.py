@@ -17,10 +17,10 @@ Fern, after renerf_rounds.py:
 """
 import dataclasses
 import os
-import sys
 
 import numpy as np
 
+from experiments import tables
 from experiments.render_video import load_params, run_config, run_parser
 from renerf_jax import report, resume
 from renerf_jax.datasets import load_scene
@@ -56,7 +56,7 @@ def main(argv=None):
   report.save_image_png(args.out + '.png', panel)
   out = dict(timing, views=args.views, run_dir=args.run_dir, round=args.round,
              hessian_rays=config.hessian_rays, deform_log2_res=config.deform_log2_res,
-             command='python -m experiments.uncertainty_panel ' + ' '.join(sys.argv[1:]))
+             command=tables.command_line('experiments.uncertainty_panel'))
   nxt = os.path.join(resume.round_dir(args.run_dir, args.round + 1), 'result.json')
   if os.path.isfile(nxt):
     round_s = report.read_json(nxt)['metrics']['round_seconds']

@@ -13,7 +13,8 @@ QUICKSTART = [
     ('md', '# renerf-jax quick start\n\nOne Re-Nerfing round on the embedded scene (no '
      'download): train B on 3 views, render pseudo-views between the training cameras, '
      "estimate B's Laplace uncertainty, mask uncertain pixels, train D from scratch, and "
-     'plot test PSNR against run time. In Colab, first run `!pip install -e .` in a clone.'),
+     'plot test PSNR against run time. First run `pip install -e .` in the repository '
+     'root (in Colab: `!pip install -e .` in a clone).'),
     ('code', '''import os, tempfile
 import numpy as np
 import matplotlib.pyplot as plt
@@ -63,7 +64,8 @@ assert all(np.isfinite(v) for pts in curves.values() for _, v in pts)'''),
 BYO = [
     ('md', '# Bring your own LLFF scene\n\nPoint `DATA_DIR` at a folder holding `<scene>/'
      'poses_bounds.npy` and `<scene>/images_8/` (the LLFF layout; make them with COLMAP and '
-     "LLFF's imgs2poses.py), then train the CPU configuration and evaluate it."),
+     "LLFF's imgs2poses.py), then train the CPU configuration and evaluate it. First run "
+     '`pip install -e .` in the repository root.'),
     ('code', '''import os, tempfile
 import matplotlib.pyplot as plt
 from renerf_jax.configs import load_config

@@ -1,16 +1,16 @@
 """What the round driver needs of a model family (`Config.backbone`).
 
 Re-Nerfing is an add-on to any novel-view-synthesis backbone. A round needs five things
-of one, each a function of the Config and the Scene; only `train` writes files (its
-checkpoints and log, through rundir, when given a directory), the rest return arrays
-that resume.py writes (outputs.py):
+of one, each a function of the Config and the Scene; only `train` (its checkpoints and
+log, through rundir, when given a directory) and `export` write files, the rest return
+arrays that resume.py writes (outputs.py):
 
   init_params(config)                        -> a parameter template (loading a round)
   train(config, scene, out_dir, pseudo, ...) -> training.TrainResult, trained from scratch
       on the real training views plus the pseudo-views (drawn inside the step window)
   synthesize(config, scene, params, ...)     -> (PseudoViews, timing, meta)
   cheap_eval_fn(config, scene)               -> params -> test PSNR (training curves)
-  evaluate(config, scene, params)           -> evaluation.Evaluation (metrics, renders)
+  evaluate(config, scene, params)            -> evaluation.Evaluation (metrics, renders)
 
 and, for anything that looks at a model, `render_views(config, scene, params, poses)`:
 RGB, depth and accumulated opacity at cameras; optionally `export(params, round_dir)`,

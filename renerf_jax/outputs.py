@@ -1,7 +1,7 @@
 """The files a run writes of its results: test evaluations and pseudo-views.
 
 The edge of the math: evaluation, pseudo-view synthesis and uncertainty return arrays
-and dicts; resume.py, eval.py and experiments/ write them with the functions here. Every
+and dicts; resume.py and eval.py write them with the functions here. Every
 file is written atomically (report.atomic_open: temp file + rename).
 """
 import os

@@ -214,7 +214,7 @@ class Tables(NamedTuple):
   """The per-vertex tables of the Hessian variants (device arrays)."""
   sigmas: Dict[str, jnp.ndarray]  # 'laplace', 'laplace_all_rays': [V] sigma.
   variances: Dict[str, jnp.ndarray]  # 'bayes_rays', 'bayes_rays_subsample': [V] variance.
-  u_bg: float  # Ours' background U: laplace.prior_sigma(lambda).
+  u_bg: float  # The Laplace variants' background U: laplace.prior_sigma(lambda).
 
 
 def hessian_tables(config, params, train_rays, lo, hi, show_progress: bool = False):

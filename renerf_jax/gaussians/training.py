@@ -5,8 +5,8 @@ pseudo-view window, from the real and the pseudo-views together (the pseudo-view
 the real views as images drawn uniformly"); the loss is (1 - l) L1 + l (1 - SSIM) with
 per-pixel masks; per-parameter Adam learning rates (the position's decayed exponentially
 and scaled by the scene extent); the SH degree raised every `gs_sh_interval_frac` of the
-run (schedule.py); adaptive density control (density.py) between steps; the loss of
-loss.py. `train_gaussians` mirrors
+run (schedule.py); adaptive density control (density.py) between steps; the loss is
+loss.py's. `train_gaussians` mirrors
 `renerf_jax.training.train_model` at the edges: atomic checkpoints, bit-for-bit resume,
 the JSONL log, the evaluation curve and the progress bar.
 
@@ -44,7 +44,7 @@ TILE = 16
 class GaussianTrainState:
   step: jnp.ndarray  # int32 scalar: optimisation steps taken.
   params: params_lib.Gaussians
-  opt_state: Any  # optax state of the FIELDS dict (see to_fields).
+  opt_state: Any  # optax state of the schedule.FIELDS dict (see to_fields).
   nan_skips: jnp.ndarray  # int32 scalar: steps skipped for a non-finite loss/gradient.
   stats: density.DensityStats  # Densification statistics since the last densification.
   dropped: jnp.ndarray  # int32 scalar: densification candidates that found no free slot.
