@@ -7,7 +7,7 @@ For each image size (fern's 504x378 downsampled by --downsample) and Gaussian co
 seconds per training step (forward, backward, Adam; median of --repeats after warm-up),
 seconds per render (forward only), the fraction of tiles where the tile cap binds, and
 the compile time. Gaussians are placed at random in fern's world box (as a fresh run
-starts), or, with --trained RUN_DIR, the first N active Gaussians of a trained round.
+starts).
 The grid NeRF row is `table_converged2.gin`'s step at the same image size. Writes
 JSON and a markdown table to --out (.json / .md).
 """
