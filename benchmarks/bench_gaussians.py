@@ -14,7 +14,6 @@ JSON and a markdown table to --out (.json / .md).
 import argparse
 import dataclasses
 import os
-import sys
 import time
 
 import jax
@@ -22,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks.bench_throughput import time_calls
+from experiments.tables import command_line
 from renerf_jax import report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
@@ -112,7 +112,7 @@ def main():
                    'gaussians': n, 'train_s': train_s, 'render_s': render_s,
                    'cap_bound': bound, 'compile_s': compile_s})
       print(rows[-1], flush=True)
-  cmd = 'python -m benchmarks.bench_gaussians ' + ' '.join(sys.argv[1:])
+  cmd = command_line('benchmarks.bench_gaussians')
   report.write_json(args.out + '.json', {'rows': rows, 'command': cmd,
                                          'cpu_count': os.cpu_count()})
   table = report.markdown_table(rows, [

@@ -22,8 +22,6 @@ import dataclasses
 import functools
 import json
 import os
-import shlex
-import sys
 import time
 
 import jax
@@ -31,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks.bench_throughput import time_calls
+from experiments.tables import command_line
 from renerf_jax import laplace, model, report
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
@@ -221,8 +220,7 @@ def main(argv=None):
     rows.append(bench_config(path, args.gin_bindings, n, args.chunk, args.log2_res,
                              args.repeats))
     print(json.dumps(rows[-1]), flush=True)
-  command = 'python ' + shlex.join(
-      ['-m', 'benchmarks.bench_hessian'] + list(sys.argv[1:] if argv is None else argv))
+  command = command_line('benchmarks.bench_hessian', argv)
   report.write_json(args.out + '.json', {'rows': rows, 'command': command})
   report.write_markdown(args.out + '.md', markdown(rows, command))
   return rows

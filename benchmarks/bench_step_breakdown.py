@@ -28,14 +28,13 @@ and markdown to benchmarks/results/ (or --out).
 """
 import argparse
 import os
-import shlex
-import sys
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from benchmarks.bench_throughput import time_calls, xla_cost
+from experiments.tables import command_line
 from renerf_jax import mip, model, regularizers, report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
@@ -159,7 +158,7 @@ def main(argv=None):
           'seconds': '.4f', 'share_of_step': '.0%', 'gflop': '.2f', 'gb': '.3f',
           'flop_per_byte': '.2f', 'gflop_per_s': '.1f', 'gb_per_s': '.1f',
           'step_vs_first': '.2f'})
-  command = 'python ' + shlex.join(['-m', 'benchmarks.bench_step_breakdown'] + sys.argv[1:])
+  command = command_line('benchmarks.bench_step_breakdown', argv)
   text = (f'{table}\n\nParts overlap (render+grad contains encode and mlps); "of step" is '
           f'each part\'s time over the whole step\'s. Device: {jax.devices()[0]}, '
           f'{os.cpu_count()} CPUs.\n\nCommand:\n\n    {command}\n')

@@ -21,8 +21,6 @@ idle machine: a second job on the 2 cores halves every rate.
 import argparse
 import dataclasses
 import os
-import shlex
-import sys
 import time
 
 import jax
@@ -30,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks.bench_train_step import matmul_gflops
+from experiments.tables import command_line
 from renerf_jax import deformation, laplace, model, report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
@@ -194,7 +193,7 @@ def main(argv=None):
   add_speedups(rows)
   for row in rows:
     row['flop_efficiency'] = row['achieved_gflops'] / roof
-  command = 'python ' + shlex.join(['-m', 'benchmarks.bench_throughput'] + sys.argv[1:])
+  command = command_line('benchmarks.bench_throughput', argv)
   os.makedirs(os.path.dirname(args.out) or '.', exist_ok=True)
   report.write_json(args.out + '.json', {'matmul_gflops': roof,
                                          'device': str(jax.devices()[0]),

@@ -9,13 +9,13 @@ to benchmarks/results/ (or --out).
 """
 import argparse
 import os
-import sys
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from experiments.tables import command_line
 from renerf_jax import model, report, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
@@ -80,8 +80,7 @@ def main():
     print(row, flush=True)
   report.write_json(args.out + '.json', {'matmul_gflops': roof, 'device': str(jax.devices()[0]),
                                          'rows': rows,
-                                         'command': 'python -m benchmarks.bench_train_step '
-                                                    + ' '.join(sys.argv[1:])})
+                                         'command': command_line('benchmarks.bench_train_step')})
   text = write_table(rows, roof, args.out)
   print(text)
 

@@ -30,9 +30,10 @@ converts. Writes <out>/gsplat_check.json and .md with the largest differences.
 import argparse
 import json
 import os
-import sys
 
 import numpy as np
+
+from experiments.tables import command_line
 
 # pylint: disable=g-import-not-at-top
 
@@ -143,8 +144,7 @@ def main(argv=None):
     rows.append(dict(seed=seed, **row))
     print(json.dumps(rows[-1]))
   os.makedirs(args.out, exist_ok=True)
-  command = 'python ' + ' '.join(['-m', 'experiments.gsplat_check'] + list(
-      argv if argv is not None else sys.argv[1:]))
+  command = command_line('experiments.gsplat_check', argv)
   result = {'rows': rows, 'gsplat': gsplat.__version__, 'torch': torch.__version__,
             'command': command}
   from renerf_jax import report

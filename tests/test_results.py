@@ -69,6 +69,18 @@ def config_args(args):
   return files
 
 
+def check_command(where, how, target, args):
+  """Asserts that a command named in `where` finds what it runs and that every gin file
+  it names parses (load_config raises on one that does not)."""
+  problem = command_problem(how, target)
+  assert problem is None, f'{where}: {problem}'
+  for gin in config_args(args):
+    path = gin if os.path.isabs(gin) else str(REPO / gin)
+    if not os.path.exists(path):
+      path = str(REPO / 'gin_configs' / gin)
+    load_config([path])
+
+
 def test_results_folders_exist():
   assert len(FOLDERS) >= 4, FOLDERS
 
@@ -79,13 +91,7 @@ def test_each_results_folder_names_commands_that_exist_and_configs_that_parse(fo
   assert cmds, (f'{folder.name}/README.md names no `python -m <module>` or '
                 '`python <script>.py` command')
   for how, target, args in cmds:
-    problem = command_problem(how, target)
-    assert problem is None, f'{folder.name}: {problem}'
-    for gin in config_args(args):
-      path = gin if os.path.isabs(gin) else str(REPO / gin)
-      if not os.path.exists(path):
-        path = str(REPO / 'gin_configs' / gin)
-      load_config([path])  # raises on a config that does not parse
+    check_command(folder.name, how, target, args)
 
 
 def test_command_parsing_handles_continuations_and_config_lists(tmp_path):
@@ -124,13 +130,7 @@ def test_readme_commands_exist_and_their_configs_parse():
   for how, target, args in cmds:
     if how == '-m' and target == 'pytest':
       continue
-    problem = command_problem(how, target)
-    assert problem is None, f'README.md: {problem}'
-    for gin in config_args(args):
-      path = gin if os.path.isabs(gin) else str(REPO / gin)
-      if not os.path.exists(path):
-        path = str(REPO / 'gin_configs' / gin)
-      load_config([path])
+    check_command('README.md', how, target, args)
   links = re.findall(r'\]\((experiments/results/[\w/]+)\)', readme.read_text())
   assert links and all((REPO / link).is_dir() for link in links), links
   assert len(readme.read_text().splitlines()) <= 120  # issue 35: read in two minutes

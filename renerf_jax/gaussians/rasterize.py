@@ -14,8 +14,9 @@ As the CUDA rasterisers (3DGS, gsplat) do, the tile lists are walked in chunks o
 `lax.while_loop` that stops when every pixel of the image is done or the longest list
 is exhausted: a tile list may be as long as the number of Gaussians (no cap). The stop
 is global (all tiles step together), so a step costs about T * P * ceil(longest list /
-chunk) alpha evaluations unless every pixel saturates first. Within a chunk the transmittance is a cumulative
-product, and the first Gaussian that would take it below 1e-4 ends the pixel.
+chunk) alpha evaluations unless every pixel saturates first. Within a chunk the
+transmittance is a cumulative product, and the first Gaussian that would take it below
+1e-4 ends the pixel.
 
 The gradient is a custom VJP, the reference rasteriser's backward pass: the chunks are
 walked back to front from the final transmittance, which is divided by (1 - alpha) to
