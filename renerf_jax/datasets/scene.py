@@ -1,5 +1,6 @@
 """The Scene container, the RegNeRF few-shot split, and ray pools for training."""
 import dataclasses
+import functools
 from typing import Optional
 
 import jax
@@ -140,12 +141,20 @@ def fewshot_split(n_images, n_input_views, llffhold=8):
   return rest[pick], test_idx
 
 
+@functools.lru_cache(maxsize=64)
+def _image_rays_fn(height, width, focal, use_ndc, near, far, intrinsics):
+  """The jitted ray generator of one camera (kept: a new jit per call would trace and
+  compile again every time)."""
+  return jax.jit(jax.vmap(lambda c2w: cameras.image_rays(
+      c2w, height, width, focal, use_ndc, near, far, intrinsics)))
+
+
 def camera_rays(scene: Scene, idx, poses=None) -> cameras.Rays:
   """Rays of full images: [len(idx), H, W] for the scene's cameras (or given poses)."""
   poses = scene.poses[np.asarray(idx)] if poses is None else poses
-  fn = jax.jit(jax.vmap(lambda c2w: cameras.image_rays(
-      c2w, scene.height, scene.width, scene.focal, scene.use_ndc, scene.near, scene.far,
-      scene.intrinsics)))
+  intr = None if scene.intrinsics is None else tuple(float(v) for v in scene.intrinsics)
+  fn = _image_rays_fn(scene.height, scene.width, float(scene.focal), bool(scene.use_ndc),
+                      float(scene.near), float(scene.far), intr)
   return fn(jnp.asarray(poses, jnp.float32))
 
 

@@ -1,0 +1,116 @@
+"""What a run directory holds, read for looking at it (view.py): the config, the scene,
+each round's parameters (finished, or the latest checkpoint of the round in training),
+its pseudo-views and its training log. Reads only; never writes into the run.
+"""
+import dataclasses
+import os
+from typing import Optional
+
+from flax import serialization
+
+from renerf_jax import renerf, rundir
+from renerf_jax.backbones import get_backbone
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import load_scene
+from renerf_jax.errors import RunDirError
+from renerf_jax.outputs import load_pseudo_views
+from renerf_jax.resume import round_dir
+
+
+def run_config(run_dir):
+  """The Config a run was made with (run_dir/config.gin, as train.py wrote it)."""
+  path = os.path.join(run_dir, 'config.gin')
+  if not os.path.isfile(os.path.join(run_dir, 'config.json')) or not os.path.isfile(path):
+    raise RunDirError(f'{run_dir} is not a run directory (config.json / config.gin '
+                      'missing); train first, e.g. python train.py '
+                      '--gin_configs=gin_configs/demo.gin')
+  return load_config([path])
+
+
+@dataclasses.dataclass(frozen=True)
+class RoundInfo:
+  """One round of a run as the viewer lists it."""
+  index: int  # 0: the baseline B.
+  done: bool  # Finished (params.msgpack + DONE), else training (checkpoint or nothing).
+  step: Optional[int]  # Training step of the parameters there (None: none yet).
+
+  @property
+  def label(self) -> str:
+    name = 'B (round 0)' if self.index == 0 else f'R{self.index}'
+    if self.done:
+      return name
+    return f'{name}, training, step {self.step}' if self.step is not None else \
+        f'{name}, not started'
+
+
+def list_rounds(config, run_dir):
+  """[RoundInfo] of rounds 0..config.num_rounds that have parameters to show: finished
+  rounds and the first unfinished one if it has a checkpoint."""
+  out = []
+  for r in range(config.num_rounds + 1):
+    rdir = round_dir(run_dir, r)
+    if rundir.is_done(rdir):
+      out.append(RoundInfo(r, True, None))
+      continue
+    ckpts = rundir.list_checkpoints(os.path.join(rdir, 'train', 'checkpoints'))
+    if ckpts:
+      out.append(RoundInfo(r, False, ckpts[-1][0]))
+    break
+  return out
+
+
+def params_template(config, r):
+  """The parameter pytree of round r's backbone (its structure for deserialising)."""
+  return get_backbone(config).init_params(renerf.round_config(config, r))
+
+
+def load_params(config, run_dir, r):
+  """(params, step) of round r: the finished round's params.msgpack (step None), else the
+  latest training checkpoint's params (None, None when there is none yet).
+
+  A checkpoint is a complete file or absent (rundir.save_checkpoint renames atomically),
+  so reading while training writes is safe; one removed between listing and reading
+  (training keeps the last two) is retried once.
+  """
+  rdir = round_dir(run_dir, r)
+  template = params_template(config, r)
+  if rundir.is_done(rdir):
+    with open(os.path.join(rdir, 'params.msgpack'), 'rb') as f:
+      return serialization.from_bytes(template, f.read()), None
+  ckpt_dir = os.path.join(rdir, 'train', 'checkpoints')
+  for _ in range(2):
+    ckpts = rundir.list_checkpoints(ckpt_dir)
+    if not ckpts:
+      return None, None
+    step, path = ckpts[-1]
+    try:
+      with open(path, 'rb') as f:
+        raw = serialization.msgpack_restore(f.read())
+    except FileNotFoundError:
+      continue
+    return serialization.from_state_dict(template, raw['state']['params']), step
+  return None, None
+
+
+def latest_checkpoint_step(run_dir, r) -> Optional[int]:
+  """Step of round r's newest training checkpoint (None: none)."""
+  ckpts = rundir.list_checkpoints(os.path.join(round_dir(run_dir, r), 'train',
+                                               'checkpoints'))
+  return ckpts[-1][0] if ckpts else None
+
+
+def round_pseudo_views(run_dir, r):
+  """The PseudoViews round r trained on (None for B or before they are written)."""
+  return load_pseudo_views(os.path.join(round_dir(run_dir, r), 'pseudo_views'))
+
+
+def last_log_record(run_dir, r) -> Optional[dict]:
+  """The last record of round r's training log (step, loss, PSNR, ...), None if empty."""
+  recs = rundir.read_jsonl(os.path.join(round_dir(run_dir, r), 'train', 'log.jsonl'))
+  return recs[-1] if recs else None
+
+
+def open_run(run_dir):
+  """(config, scene) of a run directory."""
+  config = run_config(run_dir)
+  return config, load_scene(config)

@@ -1,0 +1,422 @@
+"""The web viewer of a run (view.py): a viser server that renders the chosen round's
+model from the camera each browser moves, beside the run's cameras.
+
+- Any backbone: frames come from Backbone.render_views at a scene with the browser's
+  camera (view_cameras.view_scene), first at a preview size, then, once the camera has
+  stopped for `settle_seconds`, at the full size.
+- The scene holds the training (blue), test (green) and the shown round's pseudo-view
+  (orange) cameras as frustums with their images (pseudo-views tinted where masked).
+  Clicking a frustum, or the "Go to camera" button, moves the browser to that camera;
+  while the browser sits there, frames use that camera's own intrinsics, and the
+  'error' layer and the PSNR compare the render with the photo (for a pseudo-view: with
+  the pseudo-view image D was trained on, and the 'uncertainty' layer shows the
+  uncertainty its masks were cut from, when the run used masks).
+- Elsewhere the 'uncertainty' layer is 1 - accumulated opacity, the project's default
+  mask signal (the Laplace field needs B's Hessian, computed only for pseudo-views).
+- Two rounds side by side: "Compare with" splits the frame at the "Split" slider
+  (left: Model, right: the other round).
+- Live: with "Follow training" on, the viewer polls the unfinished round's training
+  checkpoints every `poll_seconds` and shows the newest parameters. It only reads files,
+  so training is slowed by the CPU the renders take (measured in
+  experiments/results/viewer/).
+
+The server's state (which frames went out, the rendering time) is kept for tests and the
+benchmark in `stats`.
+"""
+import dataclasses
+import threading
+import time
+from typing import Optional
+
+import numpy as np
+
+from renerf_jax import run_contents
+from renerf_jax import view_cameras as vc
+from renerf_jax.backbones import get_backbone
+from renerf_jax.metrics import mse_to_psnr
+from renerf_jax.pseudo_views import uncertainty_heatmap
+
+TRAIN_COLOUR, TEST_COLOUR, PSEUDO_COLOUR = (40, 90, 230), (30, 170, 60), (240, 140, 20)
+NONE = 'none'
+
+
+@dataclasses.dataclass
+class ViewerOptions:
+  """Options of the viewer (view.py's flags)."""
+  preview_side: int = 64  # Longer side of a frame while the camera moves (pixels).
+  full_side: Optional[int] = None  # Longer side once it stops (None: the photos').
+  settle_seconds: float = 0.25  # Camera still this long: render at full size.
+  poll_seconds: float = 2.0  # How often "Follow training" looks for a new checkpoint.
+  max_fps: float = 0.  # Cap on frames a second over all browsers (0: no cap).
+  jpeg_quality: int = 90
+
+
+@dataclasses.dataclass
+class ViewerStats:
+  """What the viewer did (read by tests and benchmarks)."""
+  frames: int = 0  # Frames sent to browsers.
+  render_seconds: float = 0.  # Time spent rendering them.
+  reloads: int = 0  # Parameter loads of a round in training ("Follow training").
+  last_camera: str = ''  # 'browser' or the snapped camera's name of the last frame.
+  last_psnr: Optional[float] = None  # PSNR of the last frame against its photo.
+  last_frame: Optional[np.ndarray] = None  # [H, W, 3] uint8 of the last frame sent.
+  last_step: Optional[int] = None  # Training step of the parameters last shown.
+
+
+def camera_list(scene, pseudo):
+  """[(name, kind, pose [3, 4], image [H, W, 3] or None)] of the cameras to draw: the
+  training views, the test views and the pseudo-views (their masked images)."""
+  out = [(f'train {i}', 'train', scene.poses[i], scene.images[i]) for i in scene.train_idx]
+  out += [(f'test {i}', 'test', scene.poses[i], scene.images[i]) for i in scene.test_idx]
+  if pseudo is not None:
+    for j in range(len(pseudo.poses)):
+      out.append((f'pseudo {j}', 'pseudo', np.asarray(pseudo.poses[j]),
+                  vc.masked_view(pseudo.images[j], pseudo.masks[j])))
+  return out
+
+
+class Viewer:
+  """A viser server showing one run directory (see the module docstring)."""
+
+  def __init__(self, run_dir, host='127.0.0.1', port=8080,
+               options: Optional[ViewerOptions] = None):
+    import viser  # pylint: disable=g-import-not-at-top
+    self.run_dir, self.opts = run_dir, options or ViewerOptions()
+    self.config, self.scene = run_contents.open_run(run_dir)
+    self.backbone = get_backbone(self.config)
+    self.stats = ViewerStats()
+    self.rounds = run_contents.list_rounds(self.config, run_dir)
+    if not self.rounds:
+      from renerf_jax.errors import RunDirError  # pylint: disable=g-import-not-at-top
+      raise RunDirError(f'{run_dir} has no trained parameters yet (no finished round and '
+                        'no checkpoint); wait for the first checkpoint')
+    self._params = {}  # round -> (params, step)
+    self._params_lock = threading.Lock()
+    self._render_lock = threading.Lock()  # One render at a time (the CPU is shared).
+    self._clients = {}  # client id -> _ClientState
+    self._last_frame_time = 0.
+    self._stop = threading.Event()
+    self.server = viser.ViserServer(host=host, port=port, verbose=False,
+                                    label='renerf-jax')
+    if self.opts.full_side is None:
+      self.opts = dataclasses.replace(self.opts, full_side=max(self.scene.height,
+                                                                self.scene.width))
+    self.scale = vc.frustum_scale(self.scene.poses)
+    self._frustums = []
+    self._build_gui()
+    self._draw_cameras()
+    self.server.on_client_connect(self._on_connect)
+    self.server.on_client_disconnect(self._on_disconnect)
+    self._poller = threading.Thread(target=self._poll, daemon=True)
+    self._poller.start()
+
+  # ----------------------------------------------------------------------------- GUI
+
+  def _labels(self):
+    return [ri.label for ri in self.rounds]
+
+  def _round_of(self, label) -> Optional[int]:
+    for ri in self.rounds:
+      if ri.label == label:
+        return ri.index
+    return None
+
+  def _build_gui(self):
+    gui = self.server.gui
+    c = self.config
+    gui.add_markdown(f'**{self.run_dir}**  \n{self.scene.name}, backbone '
+                     f'`{c.backbone}`, {len(self.scene.train_idx)} training views')
+    labels = self._labels()
+    self.gui_model = gui.add_dropdown('Model', labels, initial_value=labels[-1])
+    self.gui_compare = gui.add_dropdown('Compare with', [NONE] + labels, initial_value=NONE)
+    self.gui_split = gui.add_slider('Split', 0., 1., .01, .5)
+    self.gui_layer = gui.add_dropdown('Layer', vc.LAYERS, initial_value='rgb')
+    self.gui_side = gui.add_slider('Resolution', 16, 1024, 1, self.opts.full_side)
+    self.gui_follow = gui.add_checkbox('Follow training', initial_value=True)
+    names = [name for name, *_ in self._cameras()]
+    self.gui_camera = gui.add_dropdown('Camera', names, initial_value=names[0])
+    self.gui_go = gui.add_button('Go to camera')
+    self.gui_status = gui.add_markdown('')
+    for h in (self.gui_model, self.gui_compare, self.gui_split, self.gui_layer,
+              self.gui_side):
+      h.on_update(lambda _: self._request_all())
+    self.gui_model.on_update(lambda _: self._draw_cameras())
+
+    @self.gui_go.on_click
+    def _(event):
+      self.snap(event.client, self.gui_camera.value)
+
+  def _cameras(self):
+    r = self._round_of(self.gui_model.value) if hasattr(self, 'gui_model') else None
+    pseudo = run_contents.round_pseudo_views(self.run_dir, r) if r else None
+    return camera_list(self.scene, pseudo)
+
+  def _draw_cameras(self):
+    """(Re)draws the frustums: training, test and the shown round's pseudo-views."""
+    for h in self._frustums:
+      h.remove()
+    self._frustums = []
+    cams = self._cameras()
+    colours = {'train': TRAIN_COLOUR, 'test': TEST_COLOUR, 'pseudo': PSEUDO_COLOUR}
+    fov = vc.fov_y(self.scene.height, self.scene.focal)
+    aspect = self.scene.width / self.scene.height
+    for name, kind, pose, image in cams:
+      wxyz, pos = vc.browser_from_pose(pose)
+      h = self.server.scene.add_camera_frustum(
+          f'/cameras/{name.replace(" ", "_")}', fov=fov, aspect=aspect, scale=self.scale,
+          thickness=1.5, thickness_units='screen', color=colours[kind], image=None if image is None else vc.to_uint8(image),
+          wxyz=wxyz, position=pos)
+      h.on_click(lambda event, name=name: self.snap(event.client, name))
+      self._frustums.append(h)
+    if hasattr(self, 'gui_camera'):
+      self.gui_camera.options = [name for name, *_ in cams]
+
+  # ------------------------------------------------------------------------- clients
+
+  def _on_connect(self, client):
+    st = _ClientState(client)
+    self._clients[client.client_id] = st
+    pose = self.scene.poses[self.scene.train_idx[0]]
+    client.camera.up_direction = vc.mean_up(self.scene.poses)
+    self._set_camera(client, pose, vc.fov_y(self.scene.height, self.scene.focal))
+    client.camera.on_update(lambda _: self._request(st))
+    st.thread = threading.Thread(target=self._worker, args=(st,), daemon=True)
+    st.thread.start()
+    self._request(st)
+
+  def _on_disconnect(self, client):
+    st = self._clients.pop(client.client_id, None)
+    if st is not None:
+      st.closed = True
+      st.wake.set()
+
+  def _set_camera(self, client, pose, fov):
+    wxyz, pos = vc.browser_from_pose(pose)
+    forward = -np.asarray(pose, np.float64)[:3, 2]
+    with client.atomic():
+      client.camera.fov = fov
+      client.camera.position = pos
+      client.camera.look_at = pos + forward * float(self.scene.focus_depth)
+      client.camera.wxyz = wxyz
+
+  def snap(self, client, name):
+    """Moves a browser's camera to the named scene camera ('train 0', 'pseudo 3', ...)."""
+    for cam_name, kind, pose, image in self._cameras():
+      if cam_name == name:
+        st = self._clients.get(client.client_id)
+        if st is not None:
+          st.snapped = (cam_name, kind, np.asarray(pose, np.float32), image)
+        self._set_camera(client, pose, vc.fov_y(self.scene.height, self.scene.focal))
+        if st is not None:
+          self._request(st)
+        return
+    raise KeyError(f'no camera named {name!r}')
+
+  def _request(self, st):
+    st.requested = time.perf_counter()
+    st.wake.set()
+
+  def _request_all(self):
+    for st in list(self._clients.values()):
+      self._request(st)
+
+  # ------------------------------------------------------------------------ rendering
+
+  def params(self, r, reload=False):
+    """(params, step) of round r, cached; reload=True re-reads a round in training."""
+    with self._params_lock:
+      if reload or r not in self._params:
+        p, step = run_contents.load_params(self.config, self.run_dir, r)
+        if p is not None:
+          self._params[r] = (p, step)
+      return self._params.get(r, (None, None))
+
+  def render(self, r, pose, scene):
+    """{'rgb', 'depth', 'acc'} of round r at `pose` with `scene`'s camera (one view)."""
+    params, _ = self.params(r)
+    if params is None:
+      return None
+    with self._render_lock:
+      out = self.backbone.render_views(self.config, scene, params, np.asarray(pose)[None])
+    return {k: np.asarray(v[0]) for k, v in out.items()}
+
+  def frame(self, st, side):
+    """The picture for one browser at the camera it has now, with `side` pixels on the
+    longer side (at a snapped camera: that camera's own size); None before any params."""
+    cam = st.client.camera
+    pose = vc.pose_from_browser(cam.wxyz, cam.position)
+    snapped = st.snapped
+    if snapped is not None and not _same_pose(pose, snapped[2]):
+      st.snapped = snapped = None
+    layer = self.gui_layer.value
+    stored_u = None  # The Laplace uncertainty a pseudo-view was masked with.
+    if snapped is not None:
+      scene, pose, photo = vc.scene_camera_scene(self.scene), snapped[2], snapped[3]
+      if snapped[1] == 'pseudo':
+        pv = run_contents.round_pseudo_views(self.run_dir,
+                                             self._round_of(self.gui_model.value))
+        j = int(snapped[0].split()[1])
+        photo = pv.images[j]
+        if layer == 'uncertainty' and np.any(pv.uncertainty):
+          stored_u = uncertainty_heatmap(pv.uncertainty[j], pv.uncertainty)
+    else:
+      h, w = vc.render_size(cam.aspect, side)
+      scene = vc.view_scene(self.scene, h, w, vc.focal_for_fov(h, cam.fov))
+      photo = None
+    psnr = None
+
+    def picture(r):
+      nonlocal psnr
+      out = self.render(r, pose, scene)
+      if out is None:
+        return None
+      if photo is not None:
+        mse = float(np.mean((np.clip(out['rgb'], 0., 1.) - photo[..., :3])**2))
+        psnr = psnr if psnr is not None else float(mse_to_psnr(mse))
+      if layer == 'error' and photo is None:
+        return vc.layer_image('rgb', out) * .35  # Dimmed: no photo at this camera.
+      if stored_u is not None:
+        return stored_u
+      return vc.layer_image(layer, out, photo)
+
+    a = picture(self._round_of(self.gui_model.value))
+    if a is None:
+      return None, None
+    other = self._round_of(self.gui_compare.value)
+    if other is not None:
+      b = picture(other)
+      if b is not None:
+        a = vc.split_view(a, b, self.gui_split.value)
+    if snapped is not None:
+      a = vc.letterbox(a, cam.aspect)
+    return a, psnr
+
+  def _worker(self, st):
+    """Per browser: a preview frame at each camera change, the full frame once still."""
+    done_full_for = None
+    while not st.closed and not self._stop.is_set():
+      st.wake.wait(timeout=self.opts.settle_seconds)
+      st.wake.clear()
+      if st.closed or self._stop.is_set():
+        return
+      req = st.requested
+      if req is None:
+        continue
+      still = time.perf_counter() - req >= self.opts.settle_seconds
+      if still and done_full_for == req:
+        continue
+      side = int(self.gui_side.value) if still else min(self.opts.preview_side,
+                                                          int(self.gui_side.value))
+      self._throttle()
+      try:
+        t0 = time.perf_counter()
+        img, psnr = self.frame(st, side)
+        dt = time.perf_counter() - t0
+      except Exception as e:  # pylint: disable=broad-except
+        # A frame that fails (e.g. a camera the backbone rejects) is reported in the
+        # panel; the viewer keeps serving.
+        self.gui_status.content = f'render failed: {type(e).__name__}: {e}'
+        done_full_for = req
+        continue
+      if img is None:
+        continue
+      st.client.scene.set_background_image(vc.to_uint8(img), format='jpeg',
+                                           jpeg_quality=self.opts.jpeg_quality)
+      s = self.stats
+      s.frames += 1
+      s.render_seconds += dt
+      s.last_frame = vc.to_uint8(img)
+      s.last_camera = st.snapped[0] if st.snapped is not None else 'browser'
+      s.last_psnr = psnr
+      r = self._round_of(self.gui_model.value)
+      s.last_step = self._params.get(r, (None, None))[1]
+      self._status(img.shape, dt, psnr, r)
+      if still:
+        done_full_for = req
+      elif st.requested == req:  # Nothing newer: come back for the full frame.
+        st.wake.set()
+        time.sleep(max(0., self.opts.settle_seconds - (time.perf_counter() - req)))
+
+  def _throttle(self):
+    if self.opts.max_fps > 0:
+      wait = self._last_frame_time + 1. / self.opts.max_fps - time.perf_counter()
+      if wait > 0:
+        time.sleep(wait)
+    self._last_frame_time = time.perf_counter()
+
+  def _status(self, shape, dt, psnr, r):
+    info = next((ri for ri in self.rounds if ri.index == r), None)
+    lines = [f'frame {shape[1]}x{shape[0]} in {dt * 1e3:.0f} ms']
+    if psnr is not None:
+      lines.append(f'PSNR against the photo: {psnr:.2f} dB')
+    if info is not None and not info.done:
+      rec = run_contents.last_log_record(self.run_dir, r) or {}
+      step = self._params.get(r, (None, None))[1]
+      lines.append(f'training: showing step {step}; log at step {rec.get("step")}'
+                   + (f', loss {rec["loss"]:.4f}' if 'loss' in rec else ''))
+    self.gui_status.content = '  \n'.join(lines)
+
+  # -------------------------------------------------------------------------- live
+
+  def _poll(self):
+    """Follow training: newer checkpoints of the round in training, new rounds."""
+    while not self._stop.wait(self.opts.poll_seconds):
+      if not self.gui_follow.value:
+        continue
+      try:
+        self.refresh()
+      except Exception as e:  # pylint: disable=broad-except
+        self.gui_status.content = f'refresh failed: {type(e).__name__}: {e}'
+
+  def refresh(self) -> bool:
+    """Re-reads the run's rounds; loads a newer checkpoint of the round in training (and
+    shows it, with the newest round, when "Follow training" is on). True if changed."""
+    rounds = run_contents.list_rounds(self.config, self.run_dir)
+    changed = [ri.label for ri in rounds] != self._labels()
+    if changed:
+      following = self.gui_model.value == self._labels()[-1]
+      self.rounds = rounds
+      labels = self._labels()
+      self.gui_model.options = labels
+      self.gui_compare.options = [NONE] + labels
+      if following and self.gui_follow.value:
+        self.gui_model.value = labels[-1]
+      for ri in rounds:  # A round that finished: drop its checkpoint params.
+        if ri.done and self._params.get(ri.index, (None, None))[1] is not None:
+          self._params.pop(ri.index, None)
+    live = rounds[-1]
+    if not live.done:
+      have = self._params.get(live.index, (None, None))[1]
+      if have != live.step:
+        self.params(live.index, reload=True)
+        self.stats.reloads += 1
+        changed = True
+    if changed:
+      self._request_all()
+    return changed
+
+  def stop(self):
+    self._stop.set()
+    for st in list(self._clients.values()):
+      st.closed = True
+      st.wake.set()
+    self.server.stop()
+
+
+@dataclasses.dataclass(eq=False)
+class _ClientState:
+  client: object
+  wake: threading.Event = dataclasses.field(default_factory=threading.Event)
+  requested: Optional[float] = None
+  snapped: Optional[tuple] = None  # (name, kind, pose, photo) while at a scene camera.
+  closed: bool = False
+  thread: Optional[threading.Thread] = None
+
+
+def _same_pose(a, b, tol=1e-3):
+  """Whether two [3, 4] poses agree to `tol` (rotation entries and position relative to
+  its scale): the browser echoes a camera we set with float rounding."""
+  a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+  scale = max(1., float(np.abs(b[:, 3]).max()))
+  return (np.abs(a[:, :3] - b[:, :3]).max() < tol and
+          np.abs(a[:, 3] - b[:, 3]).max() < tol * scale)
