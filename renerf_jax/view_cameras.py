@@ -39,6 +39,31 @@ def browser_from_pose(pose):
   return quaternions.rotation_to_quaternion(rot @ _GL_TO_CV), pose[:3, 3].copy()
 
 
+def browser_pixel(point, wxyz, position, fov, width, height):
+  """Where a world point appears in a browser's canvas (pixels from its top left).
+
+  Args:
+    point: [3] world point. wxyz, position: the browser camera (OpenCV camera-to-world).
+    fov: its vertical field of view (radians). width, height: the canvas in pixels.
+
+  Returns:
+    (x, y) floats, or None for a point behind the camera.
+  """
+  rot = quaternions.quaternion_to_rotation(np.asarray(wxyz, np.float64))
+  c = rot.T @ (np.asarray(point, np.float64) - np.asarray(position, np.float64))
+  if c[2] <= 0.:
+    return None
+  f = .5 * height / np.tan(.5 * fov)
+  return float(c[0] / c[2] * f + .5 * width), float(c[1] / c[2] * f + .5 * height)
+
+
+def frustum_centre(pose, scale):
+  """World centre of the image plane of a frustum drawn `scale` in front of the camera at
+  an OpenGL pose (where a click on the frustum's image lands)."""
+  pose = np.asarray(pose, np.float64)
+  return pose[:3, 3] - scale * pose[:3, 2]
+
+
 def fov_y(height: int, focal: float) -> float:
   """Vertical field of view in radians of a pinhole `height` pixels high."""
   return float(2. * np.arctan(0.5 * height / focal))

@@ -34,6 +34,21 @@ def test_antipodal_quaternions_give_one_pose():
                              atol=1e-6)
 
 
+def test_browser_pixel_projects_like_the_renderer():
+  """A frustum's centre seen from its own camera is the canvas centre; a point on the
+  top edge ray of the field of view lands on row 0; a point behind is None."""
+  rng = np.random.default_rng(2)
+  pose = _random_pose(rng)
+  wxyz, pos = vc.browser_from_pose(pose)
+  x, y = vc.browser_pixel(vc.frustum_centre(pose, .3), wxyz, pos, 1., 640, 480)
+  assert (x, y) == (pytest.approx(320.), pytest.approx(240.))
+  fov = .8
+  top = pose[:3, :3] @ np.array([0., np.tan(fov / 2), -1.]) * 2. + pose[:3, 3]
+  x, y = vc.browser_pixel(top, wxyz, pos, fov, 640, 480)
+  assert (x, y) == (pytest.approx(320.), pytest.approx(0., abs=1e-9))
+  assert vc.browser_pixel(pose[:3, 3] + pose[:3, 2], wxyz, pos, fov, 640, 480) is None
+
+
 def test_fov_focal_round_trip_and_errors():
   for h, f in ((48, 50.), (378, 407.6), (1, 1e-3), (1000, 1e5)):
     assert vc.focal_for_fov(h, vc.fov_y(h, f)) == pytest.approx(f, rel=1e-9)

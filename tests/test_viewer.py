@@ -1,8 +1,8 @@
 """The web viewer (renerf_jax/viewer.py, view.py) on a run of the embedded procedural
 scene: its frames against the evaluation's renders, two rounds side by side, following a
 run in training, and the page in a real browser (headless Chromium, driven by
-Playwright: an image arrives, the camera moves, it snaps to a pseudo-view camera, and the
-screenshots differ).
+Playwright: an image arrives, the camera moves, a click on a pseudo-view frustum and the
+panel's button snap to pseudo-view cameras, and the screenshots differ).
 
 Chromium is Debian's (`/usr/bin/chromium`, installed by .ci/run); where no browser can be
 installed the test is skipped with the reason printed.
@@ -87,16 +87,26 @@ def test_viewer_in_headless_chromium(demo_run, tmp_path):
       moved = _canvas_shot(page, str(tmp_path / 'moved.png'))
       assert np.abs(moved - first).mean() > .01, 'moving the camera changed nothing'
 
-      # Snap to a pseudo-view camera: pick it in the panel and press "Go to camera".
+      # Snap to a pseudo-view camera by clicking its frustum: step back from the first
+      # training camera so the cameras are in view, then click the frustum's image.
       viewer.gui_model.value = 'R1'
       _wait(lambda: 'pseudo 0' in viewer.gui_camera.options, 30, 'the pseudo-view cameras')
-      viewer.gui_camera.value = 'pseudo 0'
-      page.get_by_role('button', name='Go to camera').click()
-      pseudo_pose = next(p for n, _, p, _ in viewer._cameras() if n == 'pseudo 0')
+      cams = {name: pose for name, _, pose, _ in viewer._cameras()}
+      back = cams[viewer.gui_camera.options[0]].copy()
+      back[:, 3] += 8. * viewer.scale * back[:, 2]  # OpenGL +z points backwards.
+      viewer._set_camera(client, back, client.camera.fov)
+      _wait(lambda: np.abs(vc.pose_from_browser(client.camera.wxyz, client.camera.position)
+                           - back).max() < 1e-3, 30, 'the camera to step back')
+      time.sleep(1.5)
+      box = page.locator('canvas').first.bounding_box()
+      x, y = vc.browser_pixel(vc.frustum_centre(cams['pseudo 0'], viewer.scale),
+                              client.camera.wxyz, client.camera.position,
+                              client.camera.fov, box['width'], box['height'])
+      page.mouse.click(box['x'] + x, box['y'] + y)
       _wait(lambda: viewer.stats.last_camera == 'pseudo 0', 60,
-            'a frame at the pseudo-view camera')
+            'a frame at the clicked pseudo-view camera')
       np.testing.assert_allclose(
-          vc.pose_from_browser(client.camera.wxyz, client.camera.position), pseudo_pose,
+          vc.pose_from_browser(client.camera.wxyz, client.camera.position), cams['pseudo 0'],
           atol=1e-3)
       # At a pseudo-view camera the PSNR compares R1 with the pseudo-view it trained on.
       assert viewer.stats.last_psnr is not None and np.isfinite(viewer.stats.last_psnr)
@@ -104,6 +114,14 @@ def test_viewer_in_headless_chromium(demo_run, tmp_path):
       snapped = _canvas_shot(page, str(tmp_path / 'snapped.png'))
       assert np.abs(snapped - first).mean() > .01
       assert np.abs(snapped - moved).mean() > .01
+
+      # The panel's "Go to camera" button does the same for the camera picked there.
+      viewer.gui_camera.value = 'pseudo 1'
+      page.get_by_role('button', name='Go to camera').click()
+      _wait(lambda: viewer.stats.last_camera == 'pseudo 1', 60, 'a frame at pseudo 1')
+      np.testing.assert_allclose(
+          vc.pose_from_browser(client.camera.wxyz, client.camera.position), cams['pseudo 1'],
+          atol=1e-3)
       browser.close()
   finally:
     viewer.stop()
