@@ -302,11 +302,14 @@ class Viewer:
       req = st.requested
       if req is None:
         continue
-      still = time.perf_counter() - req >= self.opts.settle_seconds
+      full_side = int(self.gui_side.value)
+      # A preview only where it is smaller than the full frame (a snapped camera renders
+      # its own size either way).
+      still = (time.perf_counter() - req >= self.opts.settle_seconds or
+               self.opts.preview_side >= full_side or st.snapped is not None)
       if still and done_full_for == req:
         continue
-      side = int(self.gui_side.value) if still else min(self.opts.preview_side,
-                                                          int(self.gui_side.value))
+      side = full_side if still else self.opts.preview_side
       self._throttle()
       try:
         t0 = time.perf_counter()
