@@ -9,7 +9,7 @@ table, writes eval_rounds.json/.md and plots error_vs_time.png in the run direct
 import os
 import sys
 
-from renerf_jax import cli, report, rundir
+from renerf_jax import cli, distributed, report, rundir
 from renerf_jax.backbones import get_backbone
 from renerf_jax.datasets import load_scene
 from renerf_jax.outputs import save_evaluation
@@ -37,8 +37,11 @@ def round_eval_dir(config, scene, params, rdir, r):
     if os.path.isfile(path) and wanted <= set(report.read_json(path)['mean']):
       return os.path.dirname(path)
   out = os.path.join(rdir, 'eval_extra')
-  save_evaluation(out, get_backbone(config).evaluate(round_config(config, r), scene,
-                                                     params, show_progress=True))
+  ev = get_backbone(config).evaluate(round_config(config, r), scene, params,
+                                     show_progress=distributed.is_writer())
+  if distributed.is_writer():
+    save_evaluation(out, ev)
+  distributed.sync(f'eval_extra {r}')  # Its metrics are read back by every process.
   return out
 
 
@@ -61,10 +64,13 @@ def main(argv=None):
     saved = state.metrics[-1]
     metrics.append(dict(mean, round=r, round_seconds=saved['round_seconds'],
                         cumulative_seconds=saved['cumulative_seconds']))
-    with open(os.path.join(ev_dir, 'metrics.md')) as f:
-      print(f'round {r}:\n' + f.read())
+    if distributed.is_writer():
+      with open(os.path.join(ev_dir, 'metrics.md')) as f:
+        print(f'round {r}:\n' + f.read())
   if not metrics:
     raise SystemExit(f'error: no finished round in {run_dir}')
+  if not distributed.is_writer():
+    return  # Process 0 of a multi-process run writes and prints.
   table = rounds_table(metrics)
   curve = curve_rows(run_dir, len(metrics))
   report.write_json(os.path.join(run_dir, 'eval_rounds.json'),

@@ -1,8 +1,12 @@
-"""Trains the baseline and Re-Nerfing rounds: python train.py --gin_configs=gin_configs/demo.gin"""
+"""Trains the baseline and Re-Nerfing rounds: python train.py --gin_configs=gin_configs/demo.gin
+
+On several machines: the same command on each, with --coordinator_address,
+--num_processes and --process_id (docs/multi_host.md).
+"""
 import os
 import sys
 
-from renerf_jax import cli, report, resume
+from renerf_jax import cli, distributed, report, resume
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import check_rounds_config, deltas_vs_baseline, rounds_table
 
@@ -13,9 +17,13 @@ def main(argv=None):
   scene = load_scene(config)
   check_rounds_config(config, scene)  # Before anything is written.
   cli.check_run_dir(config, run_dir, create=True)
-  print(f'scene {scene.name}: {len(scene.train_idx)} train / {len(scene.test_idx)} test '
-        f'views at {scene.width}x{scene.height}; run directory {run_dir}', file=sys.stderr)
-  state = resume.run_rounds(config, scene, run_dir)
+  writer = distributed.is_writer()  # Process 0 of a multi-process run prints and writes.
+  if writer:
+    print(f'scene {scene.name}: {len(scene.train_idx)} train / {len(scene.test_idx)} test '
+          f'views at {scene.width}x{scene.height}; run directory {run_dir}', file=sys.stderr)
+  state = resume.run_rounds(config, scene, run_dir, show_progress=writer)
+  if not writer:
+    return
   table = rounds_table(state.metrics)
   report.write_json(os.path.join(run_dir, 'rounds.json'), list(state.metrics))
   deltas = deltas_vs_baseline(state.metrics)

@@ -169,12 +169,14 @@ def gaussians_cheap_eval_fn(config, scene):
 
 
 def gaussians_evaluate(config, scene, params, show_progress=False):
-  """Test-view metrics and renders of the Gaussians (evaluation.Evaluation)."""
+  """Test-view metrics and renders of the Gaussians (evaluation.Evaluation); the views
+  are rendered in one call (split across processes when there are several)."""
+  out = gaussians_render_views(config, scene, params, scene.poses[scene.test_idx],
+                               show_progress=show_progress)
+
   def render_view(j, i):
-    del j
-    out = gaussians_render_views(config, scene, params, scene.poses[[i]],
-                                 show_progress=show_progress)
-    return {'rgb': out['rgb'][0], 'distance': out['depth'][0]}
+    del i
+    return {'rgb': out['rgb'][j], 'distance': out['depth'][j]}
   return evaluate_views(config, scene, render_view)
 
 

@@ -13,4 +13,9 @@ class RunDirError(RuntimeError):
   """A run directory that cannot be used without losing earlier results."""
 
 
-USER_ERRORS = (ConfigError, DataError, RunDirError)
+class DistributedError(RuntimeError):
+  """A multi-process run that cannot start: bad process flags, a coordinator not
+  reached."""
+
+
+USER_ERRORS = (ConfigError, DataError, RunDirError, DistributedError)

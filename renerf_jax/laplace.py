@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import mip
+from renerf_jax import distributed, mip
 from renerf_jax.deformation import grid_size, trilinear_corners
 from renerf_jax.model import colour_levels, render_rays
 from renerf_jax.progress import progress_bar
@@ -227,7 +227,10 @@ def hessian_diagonal(config, params, rays, lo, hi, log2_res: int, lam: float,
   chunk * levels * 8 S terms), and the chunk sums are added with Kahan compensated
   summation in float32 on the device (sparse_kahan_add: only at the vertices the chunk
   touches), so millions of rays neither overflow nor drop small terms, and the [V, 3]
-  accumulator never leaves the device.
+  accumulator never leaves the device. With several processes (renerf_jax.distributed)
+  each sums every P-th chunk and the P compensated sums are added in process order
+  (one all-gather of the [V, 3] accumulator): the same sum to float32 rounding, not bit
+  for bit (the chunks are added in another order).
 
   Args:
     config: Config. params: field parameters of the trained model.
@@ -250,15 +253,16 @@ def hessian_diagonal(config, params, rays, lo, hi, log2_res: int, lam: float,
   total = jnp.zeros((grid_size(log2_res), 3), jnp.float32)
   comp = jnp.zeros_like(total)
   scratch = jnp.zeros_like(total)
+  params = distributed.local(params)
   bar = progress_bar(total=num, desc='Hessian', disable=not show_progress, unit='ray')
-  for start in range(0, num, chunk):
-    idx, valid = _chunk_indices(num, start, chunk)
+  for k in distributed.share(-(-num // chunk)):  # All chunks with one process.
+    idx, valid = _chunk_indices(num, k * chunk, chunk)
     part = jax.tree_util.tree_map(lambda x, idx=idx: jnp.take(x, idx, axis=0), rays)
     total, comp, scratch = _hessian_chunk(cfg, log2_res, params, part, jnp.asarray(valid),
                                           lo, hi, total, comp, scratch)
     bar.update(int(valid.sum()))
   bar.close()
-  return (2. / num) * (total - comp) + 2. * lam
+  return (2. / num) * distributed.sum_over_processes(total - comp) + 2. * lam
 
 
 # --------------------------------------------------------------- per-vertex sigma

@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from renerf_jax import distributed
 from renerf_jax.model import render_rays
 from renerf_jax.progress import progress_bar
 
@@ -19,6 +20,10 @@ def render_flat(config, params, rays, chunk=None, show_progress=False, desc='ren
                 chunk_fn=None):
   """Renders rays [N] in chunks of config.render_chunk (last chunk padded).
 
+  With several processes each renders every P-th chunk (the same chunks, padded the
+  same way, as one process renders) and the chunks are gathered to every process
+  (distributed.map_shares), so the result does not depend on the process count.
+
   Args:
     config: Config. params: field parameters. rays: Rays with leading shape [N].
     chunk: rays per chunk (default config.render_chunk).
@@ -30,20 +35,25 @@ def render_flat(config, params, rays, chunk=None, show_progress=False, desc='ren
   """
   chunk = chunk or config.render_chunk
   fn = chunk_fn or functools.partial(_render_chunk, config)
+  params = distributed.local(params)
   n = rays.origins.shape[0]
-  outs = []
   bar = progress_bar(total=n, desc=desc, disable=not show_progress, unit='ray')
-  for i in range(0, n, chunk):
+
+  def render_chunk(k):
+    i = k * chunk
     part = jax.tree_util.tree_map(lambda x: x[i:i + chunk], rays)
     m = part.origins.shape[0]
     if m < chunk:
       part = jax.tree_util.tree_map(
           lambda x: jnp.pad(x, [(0, chunk - m)] + [(0, 0)] * (x.ndim - 1), mode='edge'),
           part)
-    out = fn(params, part)
-    outs.append(jax.tree_util.tree_map(lambda x: np.asarray(x[:m]), out))
+    out = jax.tree_util.tree_map(np.asarray, fn(params, part))
     bar.update(m)
+    return out
+  outs = distributed.map_shares(render_chunk, -(-n // chunk))
   bar.close()
+  outs = [jax.tree_util.tree_map(lambda x, k=k: x[:min(chunk, n - k * chunk)], out)
+          for k, out in enumerate(outs)]
   return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, 0), *outs)
 
 

@@ -9,13 +9,15 @@
 A round marked DONE is loaded, never rewritten; an interrupted round resumes from what it
 left: its pseudo-views (if saved) and its last atomic checkpoint. Every write is atomic
 (temp file + rename), and temp files of a killed write are removed when the round resumes.
+In a multi-process run (renerf_jax.distributed) every process computes each round and
+reads what is on disk; process 0 alone writes.
 """
 import os
 from typing import Callable, Optional
 
 from flax import serialization
 
-from renerf_jax import backbones, renerf, report, rundir
+from renerf_jax import backbones, distributed, renerf, report, rundir
 from renerf_jax.outputs import load_pseudo_views, save_evaluation, save_pseudo_views
 
 
@@ -36,8 +38,9 @@ def stored_synthesis(out_dir, synthesize_fn: Callable = renerf.synthesize) -> Ca
       return pv, report.read_json(info_path), report.read_json(
           os.path.join(out_dir, 'views.json'))
     pv, timing, meta = synthesize_fn(config, scene, params, show_progress)
-    save_pseudo_views(out_dir, pv, meta)
-    report.write_json(info_path, timing)  # Last: it marks the pseudo-views as complete.
+    if distributed.is_writer():
+      save_pseudo_views(out_dir, pv, meta)
+      report.write_json(info_path, timing)  # Last: it marks the pseudo-views as complete.
     return pv, timing, meta
   return fn
 
@@ -50,14 +53,17 @@ def stored_evaluation(out_dir, evaluate_fn: Callable) -> Callable:
   """
   def fn(config, scene, params):
     ev = evaluate_fn(config, scene, params)
-    save_evaluation(out_dir, ev)
+    if distributed.is_writer():
+      save_evaluation(out_dir, ev)
     return ev
   return fn
 
 
 def save_round(rdir, state: renerf.RoundState, export=None):
   """Writes the round's params, the backbone's exports (export(params, rdir), e.g. the
-  Gaussians' .ply) and result.json, then marks it DONE."""
+  Gaussians' .ply) and result.json, then marks it DONE (process 0 only)."""
+  if not distributed.is_writer():
+    return
   with report.atomic_open(os.path.join(rdir, 'params.msgpack'), 'wb') as f:
     f.write(serialization.to_bytes(state.params))
   if export is not None:
@@ -97,12 +103,14 @@ def run_rounds(config, scene, run_dir, show_progress=True,
   renerf.check_rounds_config(config, scene)
   backbone = backbones.get_backbone(config)
   state = renerf.initial_state()
+  distributed.sync('run_rounds')  # Every process sees the same directory from here on.
   for r in range(config.num_rounds + 1):
     rdir = round_dir(run_dir, r)
     if rundir.is_done(rdir):
       state = load_round(config, rdir, state)
       continue
-    rundir.remove_stale_temp_files(rdir)  # Left by a run killed mid-write.
+    if distributed.is_writer():
+      rundir.remove_stale_temp_files(rdir)  # Left by a run killed mid-write.
     train_dir, eval_dir = os.path.join(rdir, 'train'), os.path.join(rdir, 'eval')
     state = renerf.round_step(
         config, scene, state, show_progress,

@@ -1,4 +1,7 @@
-"""Run directories: atomic checkpoints, resume, JSONL logs. Side effects live here."""
+"""Run directories: atomic checkpoints, resume, JSONL logs. Side effects live here.
+
+In a multi-process run (renerf_jax.distributed) only process 0 writes; every process
+reads the same files (a file system all hosts share)."""
 import glob
 import json
 import os
@@ -8,7 +11,7 @@ import time
 import numpy as np
 from flax import serialization
 
-from renerf_jax import report
+from renerf_jax import distributed, report
 
 _CKPT = re.compile(r'checkpoint_(\d+)\.msgpack$')
 
@@ -65,21 +68,26 @@ def resume_training(out_dir, state):
   Returns:
     (state, train_seconds, curve): restored from the last checkpoint with the log
     truncated to its step, or `state`, 0 and an emptied log; curve = the log's records
-    with an 'eval_psnr'.
+    with an 'eval_psnr'. (Only process 0 truncates or removes the log; the others read
+    the records up to the restored step, the same ones.)
   """
   if out_dir is None:
     return state, 0., []
   ckpt_dir, log_path = training_paths(out_dir)
   restored = restore_checkpoint(ckpt_dir, {'state': state, 'meta': {
       'train_seconds': np.zeros((), np.float64)}})
-  train_seconds = 0.
+  train_seconds, writer = 0., distributed.is_writer()
   if restored is None:
-    if os.path.exists(log_path):
+    if writer and os.path.exists(log_path):
       os.remove(log_path)
+    max_step = 0
   else:
     state, train_seconds = restored['state'], float(restored['meta']['train_seconds'])
-    truncate_jsonl(log_path, int(state.step))
-  return state, train_seconds, [r for r in read_jsonl(log_path) if 'eval_psnr' in r]
+    max_step = int(state.step)
+    if writer:
+      truncate_jsonl(log_path, max_step)
+  return state, train_seconds, [r for r in read_jsonl(log_path, max_step)
+                                if 'eval_psnr' in r]
 
 
 def save_training(out_dir, state, train_seconds):
@@ -94,7 +102,9 @@ class TrainingLog:
 
   Training time counts the steps only: evaluation and writing happen between two
   clock reads. Each logged step appends one record to out_dir's log.jsonl (nothing is
-  written when out_dir is None); evaluated records also join `curve`.
+  written when out_dir is None); evaluated records also join `curve`. With several
+  processes every one evaluates (the renders are shared), process 0 writes, and all
+  meet at each checkpoint (so a lost process stops the others there at the latest).
   """
 
   def __init__(self, config, out_dir, eval_fn, train_seconds, curve, time_offset, bar):
@@ -138,10 +148,13 @@ class TrainingLog:
     self.bar.set_postfix(loss=f"{rec['loss']:.4f}", psnr=f"{rec['psnr']:.2f}",
                          **(postfix or {}),
                          **({'test': f"{rec['eval_psnr']:.2f}"} if eval_now else {}))
-    if self.out_dir is not None:
+    writer = distributed.is_writer()
+    if self.out_dir is not None and writer:
       append_jsonl(training_paths(self.out_dir)[1], rec)
     if self._ckpt_now(done):
-      save_training(self.out_dir, state, self.train_seconds)
+      if writer:
+        save_training(self.out_dir, state, self.train_seconds)
+      distributed.sync(f'checkpoint {done}')
     self.t_last = time.perf_counter()
     return rec
 

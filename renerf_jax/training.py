@@ -15,7 +15,7 @@ import numpy as np
 import optax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from renerf_jax import cameras, metrics, regularizers, rundir
+from renerf_jax import cameras, distributed, metrics, regularizers, rundir
 from renerf_jax.config_checks import pseudo_steps
 from renerf_jax.fields import frequency_mask, init_field_params
 from renerf_jax.fields.proposal import interlevel_loss
@@ -97,13 +97,15 @@ def init_state(config, key, params=None) -> TrainState:
 
 
 def data_sharding():
-  """Batch sharding over all local devices (data parallel; one device works too)."""
+  """Batch sharding over all devices (data parallel; one device works too). With several
+  processes (renerf_jax.distributed) jax.devices() holds every process's devices: one
+  global mesh."""
   mesh = Mesh(np.array(jax.devices()), ('data',))
   return NamedSharding(mesh, PartitionSpec('data'))
 
 
 def replicated_sharding():
-  """Sharding of the train state: replicated on all local devices (as train_step returns
+  """Sharding of the train state: replicated on all devices (as train_step returns
   it, so the first step compiles the same executable as every later step)."""
   return NamedSharding(Mesh(np.array(jax.devices()), ('data',)), PartitionSpec())
 
@@ -159,9 +161,10 @@ def mixed_pool(real, pseudo):
 
 
 def pseudo_rays_per_batch(config) -> int:
-  """Pseudo rays in a batch with Config.pseudo_mix='fraction' (a multiple of the devices)."""
+  """Pseudo rays in a batch with Config.pseudo_mix='fraction' (a multiple of the devices
+  of all processes)."""
   n = int(round(config.pseudo_frac * config.batch_size))
-  return n - n % jax.local_device_count()
+  return n - n % jax.device_count()
 
 
 def draw_batch(config, pools, pseudo_on: bool, k_real, k_pseudo):
@@ -339,7 +342,7 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
     TrainResult.
   """
   cam = Camera.of(scene)
-  n_dev = jax.local_device_count()
+  n_dev = jax.device_count()
   if config.batch_size % n_dev:
     raise ValueError(f'Config.batch_size={config.batch_size} is not divisible by the '
                      f'{n_dev} devices')
@@ -349,6 +352,9 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
   state, train_seconds, curve = rundir.resume_training(
       out_dir, init_state(config, k_init, init_params))
   state = jax.device_put(state, replicated_sharding())
+  # Several processes: the pools and keys as global (replicated) arrays; every process
+  # draws the same global batch and trains on its shard of it.
+  pools = distributed.replicate(pools, replicated_sharding())
   start = int(state.step)
   bar = progress_bar(total=config.max_steps, initial=start, desc=desc,
                      disable=not show_progress)
@@ -356,8 +362,8 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
 
   for step in range(start, config.max_steps):
     pseudo_on = has_pseudo and window[0] <= step < window[1]
-    state, stats = train_step(config, cam, pseudo_on, state, pools,
-                              jax.random.fold_in(base_key, step))
+    key = distributed.replicate(jax.random.fold_in(base_key, step), replicated_sharding())
+    state, stats = train_step(config, cam, pseudo_on, state, pools, key)
     done = step + 1
     bar.update(1)
     if log.due(done):

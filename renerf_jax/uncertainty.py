@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import jaxopt
 import numpy as np
 
-from renerf_jax import laplace, mip
+from renerf_jax import distributed, laplace, mip
 from renerf_jax import uncertainty_signals as sig
 from renerf_jax.deformation import trilinear
 from renerf_jax.model import materialize, render_rays
@@ -82,19 +82,21 @@ def render_uncertainty(config, params, sigma, rays, lo, hi, chunk: int = 4096,
   chunk = max(1, min(chunk, num))
   lo = jnp.asarray(lo, jnp.float32) * jnp.ones(3, jnp.float32)
   hi = jnp.asarray(hi, jnp.float32) * jnp.ones(3, jnp.float32)
-  us, rgbs = [], []
+  params = distributed.local(params)  # Each process renders its share of the chunks.
   bar = progress_bar(total=num, desc=desc, disable=not show_progress, unit='ray')
-  for start in range(0, num, chunk):
-    idx, valid = laplace._chunk_indices(num, start, chunk)  # pylint: disable=protected-access
+
+  def one_chunk(k):
+    idx, valid = laplace._chunk_indices(num, k * chunk, chunk)  # pylint: disable=protected-access
     part = jax.tree_util.tree_map(lambda x, idx=idx: jnp.take(x, idx, axis=0), rays)
     u, rgb = _uncertainty_chunk(config, params, sigma, part, lo, hi,
                                 jnp.float32(u_bg))
-    m = int(valid.sum())
-    us.append(np.asarray(u[:m]))
-    rgbs.append(np.asarray(rgb[:m]))
-    bar.update(m)
+    bar.update(int(valid.sum()))
+    return np.asarray(u), np.asarray(rgb)
+  outs = distributed.map_shares(one_chunk, -(-num // chunk))
   bar.close()
-  u = np.concatenate(us)
+  sizes = [min(chunk, num - k * chunk) for k in range(len(outs))]
+  u = np.concatenate([o[0][:m] for o, m in zip(outs, sizes)])
+  rgbs = [o[1][:m] for o, m in zip(outs, sizes)]
   if log_scale:
     u = np.log(np.maximum(u, np.finfo(np.float32).tiny))
   return u, np.concatenate(rgbs)

@@ -8,7 +8,10 @@ and scaled by the scene extent); the SH degree raised every `gs_sh_interval_frac
 run (schedule.py); adaptive density control (density.py) between steps; the loss is
 loss.py's. `train_gaussians` mirrors
 `renerf_jax.training.train_model` at the edges: atomic checkpoints, bit-for-bit resume,
-the JSONL log, the evaluation curve and the progress bar.
+the JSONL log, the evaluation curve and the progress bar. With several processes
+(renerf_jax.distributed) every process runs the same step on the same image (one image
+a step has no batch to split; the state stays on each process's own device), and the
+renders of whole views are split across processes (render_views).
 
 The jitted step is `train_step(config, cam, pseudo_on, state, data, key)` with (config,
 cam, pseudo_on) static: two compiled variants, with and without the pseudo-views. The SH
@@ -25,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from renerf_jax import metrics, rundir
+from renerf_jax import distributed, metrics, rundir
 from renerf_jax.errors import DataError
 from renerf_jax.gaussians import density
 from renerf_jax.gaussians import params as params_lib
@@ -386,6 +389,8 @@ def _render_one(config, cam, params, pose):
 def render_views(config, scene, params, poses, show_progress=False):
   """Renders the Gaussians at camera poses with SH degree 3 and the config's background.
 
+  With several processes each renders every P-th view; all get every view.
+
   Args:
     config: Config. scene: Scene (its camera). params: Gaussians. poses: [N, 3, 4].
     show_progress: draw a progress bar.
@@ -396,12 +401,15 @@ def render_views(config, scene, params, poses, show_progress=False):
   """
   cam = Camera.of(scene)
   poses = np.asarray(poses, np.float32)
-  outs = []
+  params = distributed.local(params)
   bar = progress_bar(total=len(poses), desc='render', disable=not show_progress,
                      unit='view')
-  for pose in poses:
-    outs.append(jax.device_get(_render_one(config, cam, params, jnp.asarray(pose))))
+
+  def render(k):
+    out = jax.device_get(_render_one(config, cam, params, jnp.asarray(poses[k])))
     bar.update(1)
+    return out
+  outs = distributed.map_shares(render, len(poses))  # Each process renders its share.
   bar.close()
   if not outs:
     return {'rgb': np.zeros((0, cam.h, cam.w, 3), np.float32),
