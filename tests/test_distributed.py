@@ -195,6 +195,18 @@ def test_peer_failures_are_told_from_other_errors():
   assert distributed.first_line(ValueError('a\nb')) == 'a'
 
 
+def test_bench_counts_the_bytes_of_every_all_reduce():
+  from benchmarks.bench_multi_host import hlo_collective_bytes  # pylint: disable=g-import-not-at-top
+  hlo = (
+      '  %all-reduce = f32[1]{0} all-reduce(%a), channel_id=1, to_apply=%add\n'
+      '  %gte = f32[1]{0} get-tuple-element(%all-reduce), index=0\n'
+      '  %all-reduce.40 = (f32[3,64]{1,0}, f32[64]{0}, /*index=2*/f32[]) all-reduce(%b, %c,'
+      ' %d), channel_id=2\n'
+      '  %ag = s32[8,2]{1,0} all-gather-start(%e), dimensions={0}\n')
+  assert hlo_collective_bytes(hlo) == {'all-reduce': (2, 4 + 4 * (192 + 64 + 1)),
+                                       'all-gather': (1, 64)}
+
+
 def test_one_process_is_the_identity():
   tree = {'a': np.arange(3.)}
   assert distributed.local(tree) is tree and distributed.replicate(tree, None) is tree
