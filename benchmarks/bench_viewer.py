@@ -109,7 +109,9 @@ def run_condition(name, run_dir, args, shot_path=None):
 def main():
   p = argparse.ArgumentParser(description=__doc__,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-  p.add_argument('--out', required=True, help='output path without extension')
+  p.add_argument('--out', help='output path without extension')
+  p.add_argument('--retabulate', metavar='JSON',
+                 help="rewrite the tables of a finished run's JSON, measuring nothing")
   p.add_argument('--steps', type=int, default=400)
   p.add_argument('--checkpoint_every', type=int, default=50)
   p.add_argument('--from_step', type=int, default=100)
@@ -119,6 +121,10 @@ def main():
                  help='CPUs for training, viewer and browser (default: all of this process)')
   p.add_argument('--repeats', type=int, default=1, help='runs per condition (interleaved)')
   args = p.parse_args()
+  if args.retabulate:
+    return retabulate(args.retabulate)
+  if not args.out:
+    p.error('--out is required')
   rows = []
   with tempfile.TemporaryDirectory(prefix='bench-viewer-') as tmp:
     # One unreported run fills the compilation cache, so every condition starts alike.
@@ -132,28 +138,44 @@ def main():
         row['repeat'] = rep
         rows.append(row)
         print(row, flush=True)
+  write_tables(args.out, rows, command_line(), args.cpus, vars(args))
+
+
+def write_tables(out, rows, cmd, cpus, args):
+  """--out.json (rows, summary) and --out.md (the summary table) of the runs' rows."""
   alone = np.mean([r['steps_per_second'] for r in rows if r['condition'] == 'alone'])
   summary = []
   for name in CONDITIONS:
     rs = [r for r in rows if r['condition'] == name]
     rate = float(np.mean([r['steps_per_second'] for r in rs]))
+    frames = float(np.mean([r.get('frames', 0) for r in rs]))
+    render_s = float(np.mean([r.get('render_seconds', 0.) for r in rs]))
     summary.append({'condition': name, 'steps_per_second': rate,
-                    'slowdown_percent': 100. * (1. - rate / alone),
-                    'frames': float(np.mean([r.get('frames', 0) for r in rs])),
-                    'render_seconds': float(np.mean([r.get('render_seconds', 0.) for r in rs])),
+                    'slowdown_percent': 100. * (1. - rate / alone), 'frames': frames,
+                    'render_seconds': render_s,
+                    'seconds_per_frame': render_s / frames if frames else None,
                     'wall_seconds': float(np.mean([r['wall_seconds'] for r in rs]))})
-  cmd = command_line()
-  report.write_json(args.out + '.json', {'command': cmd, 'cpus': args.cpus, 'args': vars(args),
-                                         'rows': rows, 'summary': summary})
+  report.write_json(out + '.json', {'command': cmd, 'cpus': cpus, 'args': args,
+                                    'rows': rows, 'summary': summary})
   table = report.markdown_table(summary, [
       ('condition', 'condition'), ('steps_per_second', 'training steps/s'),
       ('slowdown_percent', 'slow-down %'), ('frames', 'frames sent'),
-      ('render_seconds', 'render s'), ('wall_seconds', 'wall s')])
-  report.write_markdown(args.out + '.md', (
-      f'Training the demo baseline ({args.steps} steps) with and without the viewer '
-      f'following it; CPUs {args.cpus}; rate from step {args.from_step} on; mean of '
-      f'{args.repeats} run(s) per condition.\n\n{table}\n\nCommand: `{cmd}`\n'))
+      ('seconds_per_frame', 's per frame'), ('wall_seconds', 'wall s')],
+      floatfmt={'steps_per_second': '.2f', 'slowdown_percent': '.1f', 'frames': '.1f',
+                'seconds_per_frame': '.2f', 'wall_seconds': '.0f'})
+  report.write_markdown(out + '.md', (
+      f'Training the demo baseline ({args["steps"]} steps) with and without the viewer '
+      f'following it; CPUs {cpus} (training, viewer and browser); rate from step '
+      f'{args["from_step"]} on; mean of {args["repeats"]} run(s) per condition; the capped '
+      f'viewer at {args["max_fps"]} frames a second.\n\n{table}\n\nCommand: `{cmd}`\n'))
   print(table)
+
+
+def retabulate(path):
+  """Rewrites the tables of a finished benchmark from its JSON (e.g. after a format
+  change), keeping the command that measured it."""
+  rec = report.read_json(path)
+  write_tables(path[:-len('.json')], rec['rows'], rec['command'], rec['cpus'], rec['args'])
 
 
 if __name__ == '__main__':
