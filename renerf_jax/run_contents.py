@@ -36,11 +36,9 @@ class RoundInfo:
 
   @property
   def label(self) -> str:
-    name = 'B (round 0)' if self.index == 0 else f'R{self.index}'
-    if self.done:
-      return name
-    return f'{name}, training, step {self.step}' if self.step is not None else \
-        f'{name}, not started'
+    """The round's name in the viewer's menus ('B (round 0)', 'R1', ...): the same while
+    it trains and once finished (the training step is shown in the status line)."""
+    return 'B (round 0)' if self.index == 0 else f'R{self.index}'
 
 
 def list_rounds(config, run_dir):

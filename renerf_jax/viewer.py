@@ -131,7 +131,8 @@ class Viewer:
     self.gui_compare = gui.add_dropdown('Compare with', [NONE] + labels, initial_value=NONE)
     self.gui_split = gui.add_slider('Split', 0., 1., .01, .5)
     self.gui_layer = gui.add_dropdown('Layer', vc.LAYERS, initial_value='rgb')
-    self.gui_side = gui.add_slider('Resolution', 16, 1024, 1, self.opts.full_side)
+    side = int(self.opts.full_side)
+    self.gui_side = gui.add_slider('Resolution', min(16, side), max(1024, side), 1, side)
     self.gui_follow = gui.add_checkbox('Follow training', initial_value=True)
     names = [name for name, *_ in self._cameras()]
     self.gui_camera = gui.add_dropdown('Camera', names, initial_value=names[0])
@@ -164,8 +165,8 @@ class Viewer:
       wxyz, pos = vc.browser_from_pose(pose)
       h = self.server.scene.add_camera_frustum(
           f'/cameras/{name.replace(" ", "_")}', fov=fov, aspect=aspect, scale=self.scale,
-          thickness=1.5, thickness_units='screen', color=colours[kind], image=None if image is None else vc.to_uint8(image),
-          wxyz=wxyz, position=pos)
+          thickness=1.5, thickness_units='screen', color=colours[kind],
+          image=None if image is None else vc.to_uint8(image), wxyz=wxyz, position=pos)
       h.on_click(lambda event, name=name: self.snap(event.client, name))
       self._frustums.append(h)
     if hasattr(self, 'gui_camera'):
@@ -205,12 +206,31 @@ class Viewer:
       if cam_name == name:
         st = self._clients.get(client.client_id)
         if st is not None:
-          st.snapped = (cam_name, kind, np.asarray(pose, np.float32), image)
+          st.snapped = self.snapped_camera(cam_name, kind, pose, image)
         self._set_camera(client, pose, vc.fov_y(self.scene.height, self.scene.focal))
         if st is not None:
           self._request(st)
         return
     raise KeyError(f'no camera named {name!r}')
+
+  def snapped_camera(self, name, kind, pose, image):
+    """What a frame at a scene camera compares with, fixed when the browser snaps there:
+    (name, kind, pose, photo, uncertainty or None). For a pseudo-view: the pseudo-view
+    image D trained on, and the uncertainty its mask was cut from (None without masks)."""
+    photo, u = image, None
+    if kind == 'pseudo':
+      pv = run_contents.round_pseudo_views(self.run_dir,
+                                           self._round_of(self.gui_model.value))
+      j = int(name.split()[1])
+      photo = np.asarray(pv.images[j])
+      if np.any(pv.uncertainty):
+        u = uncertainty_heatmap(pv.uncertainty[j], pv.uncertainty)
+    return (name, kind, np.asarray(pose, np.float32), photo, u)
+
+  def _at_snapped(self, st, pose):
+    """Whether the browser sits at the camera it last snapped to (a camera message sent
+    before the snap arrives later with the old pose: it does not cancel the snap)."""
+    return st.snapped is not None and _same_pose(pose, st.snapped[2])
 
   def _request(self, st):
     st.requested = time.perf_counter()
@@ -232,7 +252,15 @@ class Viewer:
       return self._params.get(r, (None, None))
 
   def render(self, r, pose, scene):
-    """{'rgb', 'depth', 'acc'} of round r at `pose` with `scene`'s camera (one view)."""
+    """One view of round r.
+
+    Args:
+      r: round index. pose: [3, 4] OpenGL camera-to-world. scene: the Scene whose camera
+        (size, focal, intrinsics) the frame uses.
+
+    Returns:
+      {'rgb', 'depth', 'acc'} arrays of the view, or None before r has parameters.
+    """
     params, _ = self.params(r)
     if params is None:
       return None
@@ -241,24 +269,25 @@ class Viewer:
     return {k: np.asarray(v[0]) for k, v in out.items()}
 
   def frame(self, st, side):
-    """The picture for one browser at the camera it has now, with `side` pixels on the
-    longer side (at a snapped camera: that camera's own size); None before any params."""
+    """The picture for one browser at the camera it has now.
+
+    Args:
+      st: the browser's state (its camera; the scene camera it snapped to, if any).
+      side: pixels on the longer side (at a snapped camera: that camera's own size).
+
+    Returns:
+      ([H, W, 3] float image, PSNR against the camera's photo or None); (None, None)
+      before the shown round has parameters.
+    """
     cam = st.client.camera
     pose = vc.pose_from_browser(cam.wxyz, cam.position)
-    snapped = st.snapped
-    if snapped is not None and not _same_pose(pose, snapped[2]):
-      st.snapped = snapped = None
     layer = self.gui_layer.value
+    snapped = st.snapped if self._at_snapped(st, pose) else None
     stored_u = None  # The Laplace uncertainty a pseudo-view was masked with.
     if snapped is not None:
       scene, pose, photo = vc.scene_camera_scene(self.scene), snapped[2], snapped[3]
-      if snapped[1] == 'pseudo':
-        pv = run_contents.round_pseudo_views(self.run_dir,
-                                             self._round_of(self.gui_model.value))
-        j = int(snapped[0].split()[1])
-        photo = pv.images[j]
-        if layer == 'uncertainty' and np.any(pv.uncertainty):
-          stored_u = uncertainty_heatmap(pv.uncertainty[j], pv.uncertainty)
+      if layer == 'uncertainty':
+        stored_u = snapped[4]
     else:
       h, w = vc.render_size(cam.aspect, side)
       scene = vc.view_scene(self.scene, h, w, vc.focal_for_fov(h, cam.fov))
@@ -302,43 +331,50 @@ class Viewer:
       req = st.requested
       if req is None:
         continue
-      full_side = int(self.gui_side.value)
-      # A preview only where it is smaller than the full frame (a snapped camera renders
-      # its own size either way).
-      still = (time.perf_counter() - req >= self.opts.settle_seconds or
-               self.opts.preview_side >= full_side or st.snapped is not None)
-      if still and done_full_for == req:
-        continue
-      side = full_side if still else self.opts.preview_side
-      self._throttle()
       try:
-        t0 = time.perf_counter()
-        img, psnr = self.frame(st, side)
-        dt = time.perf_counter() - t0
+        done_full_for = self._serve(st, req, done_full_for)
       except Exception as e:  # pylint: disable=broad-except
         # A frame that fails (e.g. a camera the backbone rejects) is reported in the
-        # panel; the viewer keeps serving.
+        # panel; the viewer keeps serving this browser.
         self.gui_status.content = f'render failed: {type(e).__name__}: {e}'
         done_full_for = req
-        continue
-      if img is None:
-        continue
-      st.client.scene.set_background_image(vc.to_uint8(img), format='jpeg',
-                                           jpeg_quality=self.opts.jpeg_quality)
-      s = self.stats
-      s.frames += 1
-      s.render_seconds += dt
-      s.last_frame = vc.to_uint8(img)
-      s.last_camera = st.snapped[0] if st.snapped is not None else 'browser'
-      s.last_psnr = psnr
-      r = self._round_of(self.gui_model.value)
-      s.last_step = self._params.get(r, (None, None))[1]
-      self._status(img.shape, dt, psnr, r)
-      if still:
-        done_full_for = req
-      elif st.requested == req:  # Nothing newer: come back for the full frame.
-        st.wake.set()
-        time.sleep(max(0., self.opts.settle_seconds - (time.perf_counter() - req)))
+
+  def _serve(self, st, req, done_full_for):
+    """One pass of a browser's worker: a preview or the full frame for request `req`.
+    Returns the request whose full frame has been sent."""
+    full_side = int(self.gui_side.value)
+    cam = st.client.camera
+    at_snap = self._at_snapped(st, vc.pose_from_browser(cam.wxyz, cam.position))
+    # A preview only where it is smaller than the full frame (a snapped camera renders
+    # its own size either way).
+    still = (time.perf_counter() - req >= self.opts.settle_seconds or
+             self.opts.preview_side >= full_side or at_snap)
+    if still and done_full_for == req:
+      return done_full_for
+    side = full_side if still else self.opts.preview_side
+    self._throttle()
+    t0 = time.perf_counter()
+    img, psnr = self.frame(st, side)
+    dt = time.perf_counter() - t0
+    if img is None:
+      return done_full_for
+    st.client.scene.set_background_image(vc.to_uint8(img), format='jpeg',
+                                         jpeg_quality=self.opts.jpeg_quality)
+    s = self.stats
+    s.frames += 1
+    s.render_seconds += dt
+    s.last_frame = vc.to_uint8(img)
+    s.last_camera = st.snapped[0] if at_snap else 'browser'
+    s.last_psnr = psnr
+    r = self._round_of(self.gui_model.value)
+    s.last_step = self._params.get(r, (None, None))[1]
+    self._status(img.shape, dt, psnr, r)
+    if still:
+      return req
+    if st.requested == req:  # Nothing newer: come back for the full frame.
+      st.wake.set()
+      time.sleep(max(0., self.opts.settle_seconds - (time.perf_counter() - req)))
+    return done_full_for
 
   def _throttle(self):
     if self.opts.max_fps > 0:
@@ -372,11 +408,18 @@ class Viewer:
         self.gui_status.content = f'refresh failed: {type(e).__name__}: {e}'
 
   def refresh(self) -> bool:
-    """Re-reads the run's rounds; loads a newer checkpoint of the round in training (and
-    shows it, with the newest round, when "Follow training" is on). True if changed."""
+    """Re-reads the run's rounds: lists new ones (and shows the newest when "Follow
+    training" is on and the newest was shown) and loads a newer checkpoint of the round
+    in training.
+
+    Returns:
+      Whether anything changed (then every browser gets a new frame).
+    """
     rounds = run_contents.list_rounds(self.config, self.run_dir)
-    changed = [ri.label for ri in rounds] != self._labels()
-    if changed:
+    old = {ri.index: ri for ri in self.rounds}
+    new_rounds = [ri.label for ri in rounds] != self._labels()
+    changed = new_rounds
+    if new_rounds:
       following = self.gui_model.value == self._labels()[-1]
       self.rounds = rounds
       labels = self._labels()
@@ -384,9 +427,13 @@ class Viewer:
       self.gui_compare.options = [NONE] + labels
       if following and self.gui_follow.value:
         self.gui_model.value = labels[-1]
-      for ri in rounds:  # A round that finished: drop its checkpoint params.
-        if ri.done and self._params.get(ri.index, (None, None))[1] is not None:
+    else:
+      self.rounds = rounds
+    for ri in rounds:  # A round that finished since: its final params replace the last
+      if ri.done and ri.index in old and not old[ri.index].done:  # checkpoint's.
+        with self._params_lock:
           self._params.pop(ri.index, None)
+        changed = True
     live = rounds[-1]
     if not live.done:
       have = self._params.get(live.index, (None, None))[1]
@@ -411,7 +458,8 @@ class _ClientState:
   client: object
   wake: threading.Event = dataclasses.field(default_factory=threading.Event)
   requested: Optional[float] = None
-  snapped: Optional[tuple] = None  # (name, kind, pose, photo) while at a scene camera.
+  # (name, kind, pose, photo, uncertainty) of the scene camera it last snapped to.
+  snapped: Optional[tuple] = None
   closed: bool = False
   thread: Optional[threading.Thread] = None
 

@@ -167,17 +167,17 @@ def test_psnr_at_test_cameras_equals_the_evaluation(viewer, demo_run):
   scene = viewer.scene
   for rec, i in zip(per_image, scene.test_idx):
     cam = next(c for c in viewer._cameras() if c[0] == f'test {i}')
-    st = _client_at(cam[2], aspect=scene.width / scene.height, snapped=cam)
+    st = _client_at(cam[2], aspect=scene.width / scene.height,
+                    snapped=viewer.snapped_camera(*cam))
     img, psnr = viewer.frame(st, 64)
-    assert st.snapped is not None  # Still at the camera: the frame is the photo's.
     assert img.shape == (scene.height, scene.width, 3)
     assert psnr == pytest.approx(rec['psnr'], abs=1e-3)
   # Moved away from the camera: a browser-camera frame without a photo.
   moved = cam[2].copy()
   moved[:, 3] += .05
-  st = _client_at(moved, aspect=2., snapped=cam)
+  st = _client_at(moved, aspect=2., snapped=viewer.snapped_camera(*cam))
   img, psnr = viewer.frame(st, 40)
-  assert st.snapped is None and psnr is None and img.shape == (20, 40, 3)
+  assert psnr is None and img.shape == (20, 40, 3)
 
 
 def test_pseudo_view_camera_shows_its_stored_uncertainty(viewer, demo_run):
@@ -192,10 +192,11 @@ def test_pseudo_view_camera_shows_its_stored_uncertainty(viewer, demo_run):
   cam = next(c for c in viewer._cameras() if c[0] == 'pseudo 1')
   aspect = scene.width / scene.height
   viewer.gui_layer.value = 'uncertainty'
-  img, psnr = viewer.frame(_client_at(cam[2], aspect=aspect, snapped=cam), 64)
+  at_cam = viewer.snapped_camera(*cam)
+  img, psnr = viewer.frame(_client_at(cam[2], aspect=aspect, snapped=at_cam), 64)
   np.testing.assert_allclose(img, uncertainty_heatmap(pv.uncertainty[1], pv.uncertainty))
   viewer.gui_layer.value = 'rgb'
-  rgb, _ = viewer.frame(_client_at(cam[2], aspect=aspect, snapped=cam), 64)
+  rgb, _ = viewer.frame(_client_at(cam[2], aspect=aspect, snapped=at_cam), 64)
   mse = np.mean((np.clip(rgb, 0., 1.) - pv.images[1])**2)
   assert psnr == pytest.approx(-10. * np.log10(mse), abs=1e-3)
 
@@ -225,7 +226,7 @@ def test_follow_training_shows_the_newest_checkpoint(demo_run, tmp_path):
   from flax import serialization  # pylint: disable=g-import-not-at-top
   import jax  # pylint: disable=g-import-not-at-top
   from renerf_jax import rundir, run_contents  # pylint: disable=g-import-not-at-top
-  from renerf_jax.viewer import Viewer  # pylint: disable=g-import-not-at-top
+  from renerf_jax.viewer import Viewer, ViewerOptions  # pylint: disable=g-import-not-at-top
   run = str(tmp_path / 'run')
   shutil.copytree(demo_run, run)
   for f in ('DONE', 'params.msgpack'):
@@ -238,20 +239,26 @@ def test_follow_training_shows_the_newest_checkpoint(demo_run, tmp_path):
   shutil.rmtree(ckpts)
   meta = {'train_seconds': np.zeros((), np.float64)}
   rundir.save_checkpoint(ckpts, {'state': {'step': 10, 'params': b_params}, 'meta': meta}, 10)
-  v = Viewer(run, port=free_port())
+  v = Viewer(run, port=free_port(), options=ViewerOptions(poll_seconds=3600.))
   try:
-    assert [ri.label for ri in v.rounds] == ['B (round 0)', 'R1, training, step 10']
+    assert [(ri.label, ri.done, ri.step) for ri in v.rounds] == [
+        ('B (round 0)', True, None), ('R1', False, 10)]
     same = jax.tree_util.tree_map(np.array_equal, v.params(1)[0], b_params)
     assert all(jax.tree_util.tree_leaves(same))
     assert not v.refresh()  # Nothing new.
     rundir.save_checkpoint(ckpts, {'state': {'step': 20, 'params': r1_params},
                                    'meta': meta}, 20)
     assert v.refresh() and v.stats.reloads == 1
-    assert v.rounds[-1].label == 'R1, training, step 20'
+    assert (v.rounds[-1].done, v.rounds[-1].step) == (False, 20)
     params, step = v.params(1)
     assert step == 20
     same = jax.tree_util.tree_map(np.array_equal, params, r1_params)
     assert all(jax.tree_util.tree_leaves(same))
+    # The round finishes: its final params replace the checkpoint's.
+    shutil.copy(os.path.join(demo_run, 'round_1', 'params.msgpack'),
+                os.path.join(run, 'round_1', 'params.msgpack'))
+    shutil.copy(os.path.join(demo_run, 'round_1', 'DONE'), os.path.join(run, 'round_1', 'DONE'))
+    assert v.refresh() and v.rounds[-1].done and v.params(1)[1] is None
   finally:
     v.stop()
 
