@@ -19,13 +19,14 @@ Writes <out>.json and <out>.md (the 8-GPU estimate lives in docs/multi_host.md).
 import argparse
 import json
 import os
-import socket
 import subprocess
 import sys
 import time
 
 import jax
 import numpy as np
+
+from benchmarks.ports import free_port
 
 NERF_CONFIGS = ('gin_configs/demo.gin', 'gin_configs/llff3_cpu.gin', 'gin_configs/llff3.gin',
                 'gin_configs/llff3_fast.gin')
@@ -152,15 +153,9 @@ def worker(args):
     print(json.dumps(out), flush=True)
 
 
-def _free_port():
-  with socket.socket() as s:
-    s.bind(('127.0.0.1', 0))
-    return s.getsockname()[1]
-
-
 def timed_run(args, n):
   """Runs the worker as n processes; returns process 0's JSON."""
-  port = _free_port()
+  port = free_port()
   base = [sys.executable, '-m', 'benchmarks.bench_multi_host', '--worker',
           '--config', args.config, '--steps', str(args.steps), '--warmup', str(args.warmup),
           '--num_processes', str(n), '--coordinator_address', f'127.0.0.1:{port}']

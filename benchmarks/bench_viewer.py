@@ -28,7 +28,8 @@ import time
 
 import numpy as np
 
-from benchmarks.browser import drag, free_port, launch
+from benchmarks.browser import drag, launch
+from benchmarks.ports import free_port
 from experiments.tables import command_line
 from renerf_jax import report, rundir
 

@@ -25,10 +25,3 @@ def drag(page, dx, dy, start=(.4, .5), steps=12):
   page.mouse.move(x + dx, y + dy, steps=steps)
   page.mouse.up()
 
-
-def free_port():
-  """A TCP port on 127.0.0.1 that is free now."""
-  import socket  # pylint: disable=g-import-not-at-top
-  with socket.socket() as s:
-    s.bind(('127.0.0.1', 0))
-    return s.getsockname()[1]

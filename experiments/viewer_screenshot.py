@@ -12,7 +12,8 @@ import time
 
 import numpy as np
 
-from benchmarks.browser import free_port, launch
+from benchmarks.browser import launch
+from benchmarks.ports import free_port
 from renerf_jax import view_cameras as vc
 
 

@@ -73,10 +73,15 @@ def save_round(rdir, state: renerf.RoundState, export=None):
   rundir.mark_done(rdir, {'round': state.round_index})
 
 
+def params_template(config, r):
+  """The parameter pytree of round r's backbone (its structure for deserialising)."""
+  return backbones.get_backbone(config).init_params(renerf.round_config(config, r))
+
+
 def load_round(config, rdir, state: renerf.RoundState) -> renerf.RoundState:
   """The RoundState after the finished round in rdir (read-only)."""
   r = state.round_index + 1
-  template = backbones.get_backbone(config).init_params(renerf.round_config(config, r))
+  template = params_template(config, r)
   with open(os.path.join(rdir, 'params.msgpack'), 'rb') as f:
     params = serialization.from_bytes(template, f.read())
   result = report.read_json(os.path.join(rdir, 'result.json'))

@@ -8,13 +8,12 @@ from typing import Optional
 
 from flax import serialization
 
-from renerf_jax import renerf, rundir
-from renerf_jax.backbones import get_backbone
+from renerf_jax import rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.errors import RunDirError
 from renerf_jax.outputs import load_pseudo_views
-from renerf_jax.resume import round_dir
+from renerf_jax.resume import params_template, round_dir
 
 
 def run_config(run_dir):
@@ -55,11 +54,6 @@ def list_rounds(config, run_dir):
       out.append(RoundInfo(r, False, ckpts[-1][0]))
     break
   return out
-
-
-def params_template(config, r):
-  """The parameter pytree of round r's backbone (its structure for deserialising)."""
-  return get_backbone(config).init_params(renerf.round_config(config, r))
 
 
 def load_params(config, run_dir, r):

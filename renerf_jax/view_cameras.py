@@ -98,12 +98,6 @@ def scene_camera_scene(scene: Scene) -> Scene:
   return dataclasses.replace(scene, images=scene.images[:1] * 0., depths=None)
 
 
-def to_uint8(image) -> np.ndarray:
-  """[H, W, 3] floats in [0, 1] (clipped; NaN -> 0) as uint8."""
-  x = np.nan_to_num(np.asarray(image, np.float32), nan=0., posinf=1., neginf=0.)
-  return (np.clip(x, 0., 1.) * 255. + .5).astype(np.uint8)
-
-
 LAYERS = ('rgb', 'depth', 'acc', 'uncertainty', 'error')
 
 

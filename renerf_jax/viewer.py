@@ -30,7 +30,7 @@ from typing import Optional
 
 import numpy as np
 
-from renerf_jax import run_contents
+from renerf_jax import report, run_contents
 from renerf_jax import view_cameras as vc
 from renerf_jax.backbones import get_backbone
 from renerf_jax.metrics import mse_to_psnr
@@ -91,6 +91,9 @@ class Viewer:
       raise RunDirError(f'{run_dir} has no trained parameters yet (no finished round and '
                         'no checkpoint); wait for the first checkpoint')
     self._params = {}  # round -> (params, step)
+    # The last training-log record of the round in training, read with its checkpoint.
+    self._log_record = (None if self.rounds[-1].done else
+                        run_contents.last_log_record(run_dir, self.rounds[-1].index))
     self._params_lock = threading.Lock()
     self._render_lock = threading.Lock()  # One render at a time (the CPU is shared).
     self._clients = {}  # client id -> _ClientState
@@ -166,7 +169,7 @@ class Viewer:
       h = self.server.scene.add_camera_frustum(
           f'/cameras/{name.replace(" ", "_")}', fov=fov, aspect=aspect, scale=self.scale,
           thickness=1.5, thickness_units='screen', color=colours[kind],
-          image=None if image is None else vc.to_uint8(image), wxyz=wxyz, position=pos)
+          image=None if image is None else report.to_uint8(image), wxyz=wxyz, position=pos)
       h.on_click(lambda event, name=name: self.snap(event.client, name))
       self._frustums.append(h)
     if hasattr(self, 'gui_camera'):
@@ -358,12 +361,13 @@ class Viewer:
     dt = time.perf_counter() - t0
     if img is None:
       return done_full_for
-    st.client.scene.set_background_image(vc.to_uint8(img), format='jpeg',
+    picture = report.to_uint8(img)
+    st.client.scene.set_background_image(picture, format='jpeg',
                                          jpeg_quality=self.opts.jpeg_quality)
     s = self.stats
     s.frames += 1
     s.render_seconds += dt
-    s.last_frame = vc.to_uint8(img)
+    s.last_frame = picture
     s.last_camera = st.snapped[0] if at_snap else 'browser'
     s.last_psnr = psnr
     r = self._round_of(self.gui_model.value)
@@ -389,7 +393,7 @@ class Viewer:
     if psnr is not None:
       lines.append(f'PSNR against the photo: {psnr:.2f} dB')
     if info is not None and not info.done:
-      rec = run_contents.last_log_record(self.run_dir, r) or {}
+      rec = self._log_record or {}
       step = self._params.get(r, (None, None))[1]
       lines.append(f'training: showing step {step}; log at step {rec.get("step")}'
                    + (f', loss {rec["loss"]:.4f}' if 'loss' in rec else ''))
@@ -439,6 +443,7 @@ class Viewer:
       have = self._params.get(live.index, (None, None))[1]
       if have != live.step:
         self.params(live.index, reload=True)
+        self._log_record = run_contents.last_log_record(self.run_dir, live.index)
         self.stats.reloads += 1
         changed = True
     if changed:

@@ -21,13 +21,13 @@ import json
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 
 import jax
 import numpy as np
 import pytest
+from benchmarks.ports import free_port
 from conftest import REPO
 from flax import serialization
 from test_crash_resume import _KILL_AT  # The same kill points as the crash test.
@@ -49,12 +49,6 @@ BINDINGS = [
     'Config.hessian_chunk = 256', 'Config.deform_log2_res = 4']
 METRICS = ('psnr', 'ssim')  # LPIPS off: each process would compile AlexNet.
 TIMEOUT = 600  # Seconds any one launch may take before the test kills it.
-
-
-def _free_port():
-  with socket.socket() as s:
-    s.bind(('127.0.0.1', 0))
-    return s.getsockname()[1]
 
 
 def _args(run_dir):
@@ -79,7 +73,7 @@ def _launch(tmp_path, run_dir, name, n=2, kill=None):
   """Starts train.py as n processes on a fresh loopback port; waits for all of them
   (killing every one if any runs past TIMEOUT). kill: (process id, env of its kill
   point). Returns [(returncode, stdout, stderr)] by process id."""
-  port = _free_port()
+  port = free_port()
   procs = []
   try:
     for i in range(n):
@@ -233,7 +227,7 @@ def test_bad_process_flags_give_one_line(tmp_path):
 
 
 def test_unreachable_coordinator_gives_one_line(tmp_path):
-  port = _free_port()  # Nothing listens there.
+  port = free_port()  # Nothing listens there.
   res = _train([f'--run_dir={tmp_path}', f'--coordinator_address=127.0.0.1:{port}',
                 '--num_processes=2', '--process_id=1', '--distributed_timeout=3'])
   assert res.returncode == 2, res.stderr[-2000:]
@@ -263,7 +257,7 @@ main()
 def test_a_dead_process_stops_the_other_with_one_line():
   """Process 1 dies between two barriers: process 0's next collective fails, and it
   ends with one line (exit 2) instead of a traceback or waiting for ever."""
-  port = _free_port()
+  port = free_port()
   procs = [subprocess.Popen(
       [sys.executable, '-c', _PEER_SCRIPT, f'--coordinator_address=127.0.0.1:{port}',
        '--num_processes=2', f'--process_id={i}'], cwd=REPO, env=_env(),

@@ -17,7 +17,8 @@ import time
 import numpy as np
 import pytest
 
-from benchmarks.browser import CHROMIUM, drag, free_port, launch
+from benchmarks.browser import CHROMIUM, drag, launch
+from benchmarks.ports import free_port
 from conftest import REPO, tiny_config
 
 
