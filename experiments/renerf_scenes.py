@@ -45,7 +45,7 @@ import shlex
 import numpy as np
 
 from experiments import tables
-from renerf_jax import jit_cache, report
+from renerf_jax import jit_cache, report, resume, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 
@@ -83,6 +83,9 @@ def parser():
   p.add_argument('--variant', action='append', default=[],
                  help="extra R1 row 'LABEL=binding;binding' trained from the same B")
   p.add_argument('--no_2x', action='store_true', help='skip B trained 2x longer')
+  p.add_argument('--no_r1', action='store_true',
+                 help='train B but not R1 (e.g. the oracle table, whose rows are --variant '
+                      'rows from the same B); a later call without it adds R1 to the same run')
   p.add_argument('--scenes_2x', nargs='*', default=None,
                  help='only these scenes get B trained 2x longer (default: all of '
                       '--scenes; given with no scene: none, as --no_2x)')
@@ -158,6 +161,17 @@ def pair_stats(pairs):
   return out
 
 
+def finished_rounds(run_dir):
+  """The rounds of a run whose every round is finished (read as it is: --no_r1 neither
+  trains R1 nor rewrites such a run's config), else 0 (B alone)."""
+  path = os.path.join(run_dir, 'config.json')
+  if not os.path.isfile(path):
+    return 0
+  n = int(report.read_json(path).get('num_rounds', 0))
+  done = all(rundir.is_done(resume.round_dir(run_dir, r)) for r in range(n + 1))
+  return n if done else 0
+
+
 def scene_runs(args, scene_name, base_bindings):
   """Runs every row of one scene; returns {row label: {seed: metrics of that row}}, B's
   metrics under 'B' and per-row seconds."""
@@ -165,17 +179,18 @@ def scene_runs(args, scene_name, base_bindings):
   bindings = base_bindings + [f'Config.scene = {scene_name!r}']
   config = load_config(args.config, bindings)
   scene = load_scene(config)
-  rounds = 3 if scene_name in args.rounds_scenes else 1
+  rounds = 0 if args.no_r1 else 3 if scene_name in args.rounds_scenes else 1
   rows = {}
   renerf_runs = {}
   reuse = lambda steps, seed: ([os.path.join(args.reuse, scene_name, f'N{steps}',
                                              f'seed{seed}')] if args.reuse else [])
   for seed in args.seeds:
-    cfg = dataclasses.replace(config, seed=seed, num_rounds=rounds)
-    ms = run(cfg, scene, os.path.join(root, 'Re-Nerfing', f'seed{seed}'),
-             reuse(config.max_steps, seed))
+    run_dir = os.path.join(root, 'Re-Nerfing', f'seed{seed}')
+    cfg = dataclasses.replace(config, seed=seed,
+                              num_rounds=finished_rounds(run_dir) if args.no_r1 else rounds)
+    ms = run(cfg, scene, run_dir, reuse(config.max_steps, seed))
     renerf_runs[seed] = ms
-    for m in ms:
+    for m in ms[:rounds + 1]:
       rows.setdefault('B' if m['round'] == 0 else f"R{m['round']}", {})[seed] = m
   for spec in args.variant:
     label, _, extra = spec.partition('=')
@@ -365,6 +380,8 @@ def main(argv=None):
     return
   if not args.config:
     p.error('--config is required unless --merge is given')
+  if args.no_r1 and args.rounds_scenes:
+    p.error('--no_r1 leaves no rounds for --rounds_scenes')
   for flag, names in (('--rounds_scenes', args.rounds_scenes),
                       ('--scenes_2x', args.scenes_2x or [])):
     extra = [n for n in names if n not in args.scenes]

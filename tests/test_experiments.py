@@ -237,6 +237,18 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
                        text=True, timeout=600, check=False)
   assert bad.returncode == 2
   assert 'error: --scenes_2x names fern, not in --scenes (procedural)' in bad.stderr
+  # --no_r1 (the oracle table): B and the --variant rows, R1 left out even where it exists.
+  i = cmd.index('--rounds_scenes')
+  no_r1 = cmd[:i] + cmd[i + 2:] + ['--table', 'n', '--seeds', '0', '--no_r1', '--no_2x']
+  sub = subprocess.run(no_r1, cwd=REPO, capture_output=True, text=True, timeout=600,
+                       check=False)
+  assert sub.returncode == 0, sub.stderr[-3000:]
+  n_rows = json.loads((out / 'n.json').read_text())['rows']['procedural']
+  assert set(n_rows) == {'B', 'R1 + masks'} and n_rows['B'] == {'0': rows['B']['0']}
+  assert tree_files(out / 's') == before
+  bad = subprocess.run(cmd + ['--no_r1'], cwd=REPO, capture_output=True, text=True,
+                       timeout=600, check=False)
+  assert bad.returncode == 2 and 'error: --no_r1 leaves no rounds' in bad.stderr
   # --merge: tables made apart (here seed 0 and seed 1) give the full table's rows and
   # summary, training nothing; tables of other settings or conflicting results fail.
   sub = subprocess.run(cmd + ['--table', 'v', '--seeds', '1'], cwd=REPO, capture_output=True,
