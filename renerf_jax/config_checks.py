@@ -35,6 +35,7 @@ def check_config(c):
   _check(c.dataset_loader in ('llff', 'transforms', 'blender', 'procedural'),
          f'Config.dataset_loader={c.dataset_loader!r} (llff, transforms, blender or '
          'procedural)')
+  _check(c.test_stride >= 1, f'Config.test_stride={c.test_stride} must be >= 1')
   _check(not c.piecewise_spacing or c.near < 1. < c.far,
          f'Config.piecewise_spacing needs near < 1 < far, not near={c.near}, '
          f'far={c.far}')

@@ -65,6 +65,9 @@ class Config:
   # box with them), as mip-NeRF 360 places unbounded scenes for its contraction.
   normalize_poses: bool = False
   llffhold: int = 8  # Every llffhold-th image is a test view.
+  # Blender layout (transforms_test.json): every test_stride-th test frame is a test view
+  # (the few-shot Blender protocol of DietNeRF / FreeNeRF: 8, i.e. 25 of lego's 200).
+  test_stride: int = 1
   white_bkgd: bool = False  # Composite on white (Blender).
   use_ndc: bool = True  # NDC space for forward-facing scenes; never for 360 scenes.
   near: float = 0.  # Near plane (NDC: 0).

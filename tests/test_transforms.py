@@ -12,7 +12,7 @@ from conftest import BLENDER_DIR, DATA
 from renerf_jax import cameras
 from renerf_jax.configs import Config
 from renerf_jax.datasets import camera_rays, downsample_scene, load_scene
-from renerf_jax.errors import DataError
+from renerf_jax.errors import ConfigError, DataError
 
 FOX_DIST = (0.0578421, -0.0805099, -0.000980296, 0.00015575)  # fox's transforms.json
 
@@ -210,3 +210,20 @@ def test_normalized_poses_put_the_focus_point_at_the_origin_and_cameras_within_o
   np.testing.assert_allclose(np.asarray(scene.bbox),
                              (np.asarray(raw.bbox) - centre) * scale, atol=1e-5)
   np.testing.assert_array_equal(scene.images, raw.images)
+
+
+def test_blender_test_stride_keeps_every_kth_test_frame():
+  """Config.test_stride: the few-shot Blender protocol's 25 of lego's 200 test views,
+  the same frames (images and poses) as the full test split's every 8th."""
+  kw = dict(data_dir=str(BLENDER_DIR), scene='lego', n_input_views=8, white_bkgd=True,
+            near=2., far=6.)
+  full = load_scene(Config(dataset_loader='transforms', **kw))
+  for loader in ('transforms', 'blender'):
+    sub = load_scene(Config(dataset_loader=loader, test_stride=8, **kw))
+    assert len(sub.test_idx) == 25 and len(full.test_idx) == 200
+    np.testing.assert_array_equal(sub.images[sub.test_idx], full.images[full.test_idx[::8]])
+    np.testing.assert_allclose(sub.poses[sub.test_idx], full.poses[full.test_idx[::8]],
+                               atol=1e-6)
+    np.testing.assert_array_equal(sub.images[sub.train_idx], full.images[full.train_idx])
+  with pytest.raises(ConfigError, match='Config.test_stride=0'):
+    Config(dataset_loader='transforms', test_stride=0, **kw)

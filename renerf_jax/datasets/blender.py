@@ -44,6 +44,7 @@ def load_blender(config) -> Scene:
     raise DataError(f'scene folder not found: {scene_dir}')
   tr_paths, tr_poses, angle = read_split(scene_dir, 'train')
   te_paths, te_poses, _ = read_split(scene_dir, 'test')
+  te_paths, te_poses = te_paths[::config.test_stride], te_poses[::config.test_stride]
   if config.n_input_views > len(tr_paths):
     raise DataError(f'Config.n_input_views={config.n_input_views} but {scene_dir} has '
                     f'{len(tr_paths)} train views')

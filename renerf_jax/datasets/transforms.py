@@ -186,6 +186,9 @@ def load_transforms(config) -> Scene:
     tr_paths, tr_poses, tr_cams = read_frames(train_file, sort=False)
     te_paths, te_poses, te_cams = read_frames(
         os.path.join(scene_dir, 'transforms_test.json'), sort=False)
+    te_paths, te_poses, te_cams = (te_paths[::config.test_stride],
+                                   te_poses[::config.test_stride],
+                                   te_cams[::config.test_stride])
     if config.n_input_views > len(tr_paths):
       raise DataError(f'Config.n_input_views={config.n_input_views} but {train_file} has '
                       f'{len(tr_paths)} frames')
