@@ -36,6 +36,25 @@ def read_split(scene_dir, split):
   return paths, np.stack(poses), angle
 
 
+def blender_split(n_train, n_test, config, source):
+  """The few-shot split of a Blender layout (train and test files).
+
+  Args:
+    n_train, n_test: frames in transforms_train.json and transforms_test.json.
+    config: Config (n_input_views, test_stride).
+    source: the file or folder named in the error.
+
+  Returns:
+    (the n_input_views training frames, evenly spaced; every test_stride-th test frame),
+    index arrays. Raises DataError when fewer training frames exist than are asked for.
+  """
+  if config.n_input_views > n_train:
+    raise DataError(f'Config.n_input_views={config.n_input_views} but {source} has '
+                    f'{n_train} train frames')
+  pick = np.round(np.linspace(0, n_train - 1, config.n_input_views)).astype(int)
+  return pick, np.arange(0, n_test, config.test_stride)
+
+
 def load_blender(config) -> Scene:
   """Loads a Blender scene: train views (first n_input_views evenly spread if fewer are
   asked than exist) and test views, RGBA composited on white when config.white_bkgd."""
@@ -44,11 +63,8 @@ def load_blender(config) -> Scene:
     raise DataError(f'scene folder not found: {scene_dir}')
   tr_paths, tr_poses, angle = read_split(scene_dir, 'train')
   te_paths, te_poses, _ = read_split(scene_dir, 'test')
-  te_paths, te_poses = te_paths[::config.test_stride], te_poses[::config.test_stride]
-  if config.n_input_views > len(tr_paths):
-    raise DataError(f'Config.n_input_views={config.n_input_views} but {scene_dir} has '
-                    f'{len(tr_paths)} train views')
-  pick = np.round(np.linspace(0, len(tr_paths) - 1, config.n_input_views)).astype(int)
+  pick, keep = blender_split(len(tr_paths), len(te_paths), config, scene_dir)
+  te_paths, te_poses = [te_paths[i] for i in keep], te_poses[keep]
   paths = [tr_paths[i] for i in pick] + te_paths
   rgba = image_io.read_images(paths, keep_alpha=True)
   rgb, alpha = rgba[..., :3], rgba[..., 3:]

@@ -30,6 +30,7 @@ import os
 import numpy as np
 
 from renerf_jax.datasets import images as image_io
+from renerf_jax.datasets.blender import blender_split
 from renerf_jax.datasets.scene import Scene, fewshot_split
 from renerf_jax.errors import DataError
 
@@ -186,16 +187,10 @@ def load_transforms(config) -> Scene:
     tr_paths, tr_poses, tr_cams = read_frames(train_file, sort=False)
     te_paths, te_poses, te_cams = read_frames(
         os.path.join(scene_dir, 'transforms_test.json'), sort=False)
-    te_paths, te_poses, te_cams = (te_paths[::config.test_stride],
-                                   te_poses[::config.test_stride],
-                                   te_cams[::config.test_stride])
-    if config.n_input_views > len(tr_paths):
-      raise DataError(f'Config.n_input_views={config.n_input_views} but {train_file} has '
-                      f'{len(tr_paths)} frames')
-    pick = np.round(np.linspace(0, len(tr_paths) - 1, config.n_input_views)).astype(int)
-    paths = [tr_paths[i] for i in pick] + te_paths
-    poses = np.concatenate([tr_poses[pick], te_poses], 0)
-    cams = [tr_cams[i] for i in pick] + te_cams
+    pick, keep = blender_split(len(tr_paths), len(te_paths), config, train_file)
+    paths = [tr_paths[i] for i in pick] + [te_paths[i] for i in keep]
+    poses = np.concatenate([tr_poses[pick], te_poses[keep]], 0)
+    cams = [tr_cams[i] for i in pick] + [te_cams[i] for i in keep]
     train_idx = np.arange(len(pick))
     test_idx = np.arange(len(pick), len(paths))
     meta_path = train_file
