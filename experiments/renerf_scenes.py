@@ -50,6 +50,7 @@ from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 
 METRICS = ('psnr', 'ssim', 'lpips_alex')
+TWO_X = 'B 2x steps'  # the row of B trained 2x longer (the control for more compute)
 BETTER = {'psnr': 1., 'ssim': 1., 'lpips_alex': -1.}  # sign of "D beats B"
 # ../shared/REFERENCE_NUMBERS.md: RegNeRF and + R1 (PSNR, SSIM, LPIPS), LLFF 3 views.
 PAPER = {'fern': ((19.87, .697, .202), (19.96, .709, .191)),
@@ -204,8 +205,8 @@ def scene_runs(args, scene_name, base_bindings):
     for seed in args.seeds:
       cfg = dataclasses.replace(config, seed=seed, num_rounds=0,
                                 max_steps=2 * config.max_steps)
-      rows.setdefault('B 2x steps', {})[seed] = run(
-          cfg, scene, os.path.join(root, 'B 2x steps', f'seed{seed}'),
+      rows.setdefault(TWO_X, {})[seed] = run(
+          cfg, scene, os.path.join(root, TWO_X, f'seed{seed}'),
           reuse(2 * config.max_steps, seed))[0]
   if rounds > 1:
     runs = [renerf_runs[s] for s in args.seeds]
@@ -260,6 +261,9 @@ def summarize(all_rows, scenes, seeds):
     out['mean'][label] = {'pooled': pair_stats(pairs_of(all_rows, scenes, seeds, label, 'B')),
                           'pooled_R1': (pair_stats(pairs_of(all_rows, scenes, seeds, label,
                                                             'R1')) if label != 'R1' else {}),
+                          # Against more compute: the row minus B trained 2x longer.
+                          'pooled_2x': (pair_stats(pairs_of(all_rows, scenes, seeds, label,
+                                                            TWO_X)) if label != TWO_X else {}),
                           'mean_of_scene_means': {k: tables.mean_std(v)
                                                   for k, v in per_scene.items() if v},
                           'scenes': sum(label in all_rows[sc] for sc in scenes)}
@@ -310,26 +314,30 @@ def markdown(summary, scenes, command, sources=(), backbone='nerf'):
     lines.append('')
   lines += ['### Over scenes (paired D - B)', '',
             '| row | scenes | pooled dPSNR (wins) | pooled dSSIM (wins) | pooled dLPIPS (wins) '
-            '| mean of scene means dPSNR | row - R1: dPSNR (wins) | dSSIM | dLPIPS |',
-            '|---|---|---|---|---|---|---|---|---|']
+            '| mean of scene means dPSNR | row - R1: dPSNR (wins) | dSSIM | dLPIPS '
+            '| row - B 2x: dPSNR (wins) |',
+            '|---|---|---|---|---|---|---|---|---|---|']
   for label, e in summary['mean'].items():
     p, m, q = e['pooled'], e['mean_of_scene_means'], e.get('pooled_R1', {})
     mp = f"{m['psnr'][0]:+.2f} +- {m['psnr'][1]:.2f}" if 'psnr' in m else ''
-    lines.append(f"| {label} | {e['scenes']} | {fmt_triple(p)} | {mp} | {fmt_triple(q)} |")
+    lines.append(f"| {label} | {e['scenes']} | {fmt_triple(p)} | {mp} | {fmt_triple(q)} | "
+                 f"{fmt_pair(e.get('pooled_2x', {}), 'psnr')} |")
   if summary['paper_R1_delta_mean']:
     pm = summary['paper_R1_delta_mean']
     lines.append(f"| paper R1 - RegNeRF (these scenes) | | {pm['psnr']:+.2f} | {pm['ssim']:+.3f} | "
-                 f"{pm['lpips_alex']:+.3f} | | | | |")
+                 f"{pm['lpips_alex']:+.3f} | | | | | |")
   if backbone == 'gaussians':
     b, r1 = PAPER_3DGS_360
     lines.append(f'| paper R1 - 3DGS (mip-NeRF 360, 30 views: no LLFF 3DGS rows) | | '
-                 f'{r1[0] - b[0]:+.2f} | {r1[1] - b[1]:+.3f} | {r1[2] - b[2]:+.3f} | | | | |')
+                 f'{r1[0] - b[0]:+.2f} | {r1[1] - b[1]:+.3f} | {r1[2] - b[2]:+.3f} | | | | | |')
     lines += ['', 'Backbone: 3D Gaussian Splatting. The "paper R1 - RegNeRF" rows are the '
               "paper's LLFF deltas on its NeRF backbone, for scale only."]
   lines += ['', 'dX: D minus B of the same (scene, seed), mean +- std over pairs; (wins/n): '
             'pairs where D beats B (higher PSNR / SSIM, lower LPIPS). "row - R1": the row '
             'minus R1 of the same (scene, seed), wins where the row beats R1 (R1 + masks '
-            'against R1 without; B 2x steps against R1 at about equal time). Two identical '
+            'against R1 without; B 2x steps against R1 at about equal time). "row - B 2x": the '
+            'row minus B trained 2x longer (the control for more compute), same pairing. '
+            'Two identical '
             'runs differ by 0.2-0.5 dB, so a mean delta inside its std is no gain.', '',
             'Command:', '', f'    {command}', '']
   if sources:

@@ -346,6 +346,14 @@ def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_ba
   summary = renerf_scenes.summarize(rows, ['fern'], [0, 1])
   assert summary['scenes']['fern']['R1']['paired']['psnr'][:3] == pytest.approx(
       (0.2, np.std([0.5, -0.1], ddof=1), 1))
+  assert summary['mean']['R1']['pooled_2x'] == {}  # no B 2x row: nothing to pair with
+  with_2x = dict(rows['fern'], **{'B 2x steps': {0: m(14.2), 1: m(15.4)}})
+  s2 = renerf_scenes.summarize({'fern': with_2x}, ['fern'], [0, 1])
+  # R1 - B 2x per seed: +0.3 and -0.5; one pair of two beats the longer B.
+  assert s2['mean']['R1']['pooled_2x']['psnr'][:3] == pytest.approx(
+      (-0.1, np.std([0.3, -0.5], ddof=1), 1))
+  assert s2['mean']['B 2x steps']['pooled_2x'] == {}
+  assert '| -0.10 +- 0.57 (1/2) |' in renerf_scenes.markdown(s2, ['fern'], 'cmd')
   gs = renerf_scenes.markdown(summary, ['fern'], 'cmd', backbone='gaussians')
   assert '| paper R1 - 3DGS (mip-NeRF 360, 30 views: no LLFF 3DGS rows) | | +0.81 |' in gs
   assert 'paper R1 - 3DGS' not in renerf_scenes.markdown(summary, ['fern'], 'cmd')
