@@ -1,8 +1,14 @@
 """Table 1 across scenes with paired seeds (issue 18): does D beat B, and beat more compute?
 
 For every scene and seed: the baseline B, Re-Nerfing R1 (D trained from scratch on the
-real views plus B's pseudo-views), and B trained 2x longer (for R1 also the equal-time
-control; --scenes_2x limits it to some scenes). With --rounds_scenes, those scenes also
+real views plus B's pseudo-views), B trained 2x longer (for R1 also the equal-time
+control; --scenes_2x limits it to some scenes), and the seed-matched controls of issue 49
+(--no_controls skips them): B's training at D's seed (Config.d_seed, renerf.round_config)
+at B's steps ("D's seed, no pseudo-views (K 0)": it differs from R1 in the pseudo-views
+alone) and at 2x B's steps. Every row is paired with B, with both controls, with B 2x and
+with R1: mean +- std, wins, a paired t-test p-value and a paired bootstrap 95% interval
+(experiments/paired.py); a gain is shown (bold) only when the interval excludes 0 and
+p < 0.05. With --rounds_scenes, those scenes also
 get R2, R3 and B trained for the rounds' total time. Extra rows (--variant
 'LABEL=bindings', e.g. R1 with the masks or an attribution of K, the mix or the factors)
 train R1 from the same B (copied bit for bit).
@@ -44,13 +50,24 @@ import shlex
 
 import numpy as np
 
-from experiments import tables
-from renerf_jax import jit_cache, report, resume, rundir
+from experiments import paired, tables
+from renerf_jax import jit_cache, renerf, report, resume, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 
 METRICS = ('psnr', 'ssim', 'lpips_alex')
 TWO_X = 'B 2x steps'  # the row of B trained 2x longer (the control for more compute)
+# The seed-matched controls (issue 49): B's training at D's seed (renerf.round_config),
+# at B's steps (D without pseudo-views: it differs from R1 in the pseudo-views alone) and
+# at 2x B's steps (more compute at D's seed). With Config.d_seed = 'same' they are B and
+# B 2x themselves (copied bit for bit, nothing trained).
+CONTROL = "D's seed, no pseudo-views (K 0)"
+CONTROL_2X = "D's seed, B 2x steps"
+# Every row is paired with each of these rows of the same (scene, seed): summary key,
+# row label, the short name in the tables.
+REFERENCES = (('paired', 'B', 'B'), ('paired_ctrl', CONTROL, "D's seed K 0"),
+              ('paired_ctrl2x', CONTROL_2X, "D's seed 2x"), ('paired_2x', TWO_X, 'B 2x'),
+              ('paired_R1', 'R1', 'R1'))
 BETTER = {'psnr': 1., 'ssim': 1., 'lpips_alex': -1.}  # sign of "D beats B"
 # ../shared/REFERENCE_NUMBERS.md: RegNeRF and + R1 (PSNR, SSIM, LPIPS), LLFF 3 views.
 PAPER = {'fern': ((19.87, .697, .202), (19.96, .709, .191)),
@@ -83,7 +100,12 @@ def parser():
                  help='scenes that also get R2, R3 and B at the rounds\' total time')
   p.add_argument('--variant', action='append', default=[],
                  help="extra R1 row 'LABEL=binding;binding' trained from the same B")
-  p.add_argument('--no_2x', action='store_true', help='skip B trained 2x longer')
+  p.add_argument('--no_2x', action='store_true',
+                 help="skip B trained 2x longer (and the control at 2x steps at D's seed)")
+  p.add_argument('--no_controls', action='store_true',
+                 help="skip the seed-matched controls (B's training at D's seed, at B's "
+                      "steps and, unless --no_2x, at 2x B's steps; with Config.d_seed="
+                      "'same' they are B and B 2x copied, nothing trained)")
   p.add_argument('--no_r1', action='store_true',
                  help='train B but not R1 (e.g. the oracle table, whose rows are --variant '
                       'rows from the same B); a later call without it adds R1 to the same run')
@@ -152,14 +174,21 @@ def run(config, scene, run_dir, share=()):
 
 
 def pair_stats(pairs):
-  """pairs: [(D metrics, B metrics)] -> {metric: (mean delta, std, wins, n)}."""
+  """pairs: [(row metrics, reference metrics)] -> {metric: paired.paired_summary of the
+  deltas row - reference (mean, std, wins, n, p, ci, shown)}."""
   out = {}
   for k in METRICS:
-    d = np.array([dm[k] - bm[k] for dm, bm in pairs if k in dm and k in bm], np.float64)
-    if d.size:
-      out[k] = (float(d.mean()), float(d.std(ddof=1)) if d.size > 1 else 0.,
-                int(np.sum(BETTER[k] * d > 0)), int(d.size))
+    d = [dm[k] - bm[k] for dm, bm in pairs if k in dm and k in bm]
+    if d:
+      out[k] = paired.paired_summary(d, BETTER[k])
   return out
+
+
+def control_config(config, seed, steps):
+  """The seed-matched control of (config, seed): B's training (no rounds) with the Config
+  of D (renerf.round_config of round 1: D's seed and initialisation) for `steps` steps."""
+  d = renerf.round_config(dataclasses.replace(config, seed=seed), 1)
+  return dataclasses.replace(d, num_rounds=0, max_steps=steps)
 
 
 def finished_rounds(run_dir):
@@ -208,6 +237,18 @@ def scene_runs(args, scene_name, base_bindings):
       rows.setdefault(TWO_X, {})[seed] = run(
           cfg, scene, os.path.join(root, TWO_X, f'seed{seed}'),
           reuse(2 * config.max_steps, seed))[0]
+  if not args.no_controls:
+    controls = [(CONTROL, config.max_steps, 'Re-Nerfing')]
+    if not args.no_2x and (args.scenes_2x is None or scene_name in args.scenes_2x):
+      controls.append((CONTROL_2X, 2 * config.max_steps, TWO_X))
+    for label, steps, twin in controls:
+      for seed in args.seeds:
+        # Its twin at B's seed: with Config.d_seed='same' the control is that run's B,
+        # found by the sharing rules (the same baseline config) and copied, not trained.
+        rows.setdefault(label, {})[seed] = run(
+            control_config(config, seed, steps), scene,
+            os.path.join(root, label, f'seed{seed}'),
+            [os.path.join(root, twin, f'seed{seed}')])[0]
   if rounds > 1:
     runs = [renerf_runs[s] for s in args.seeds]
     dirs = [os.path.join(root, 'Re-Nerfing', f'seed{s}') for s in args.seeds]
@@ -227,7 +268,8 @@ def pairs_of(all_rows, scenes, seeds, label, ref):
 
 
 def summarize(all_rows, scenes, seeds):
-  """Per scene and over scenes: mean +- std of each row and paired deltas vs B."""
+  """Per scene and over scenes: mean +- std of each row and its paired deltas against
+  each reference row of REFERENCES (B, the seed-matched controls, B 2x, R1)."""
   out = {'scenes': {}, 'mean': {}}
   labels = []
   for sc in scenes:
@@ -244,29 +286,25 @@ def summarize(all_rows, scenes, seeds):
       steps = sorted({m['steps'] for m in by_seed.values() if 'steps' in m})
       if steps:  # B at the rounds' total time: this scene's step count
         entry['steps'] = steps
-      if label != 'B':
-        entry['paired'] = pair_stats(pairs_of(all_rows, [sc], seeds, label, 'B'))
-      if label not in ('B', 'R1') and 'R1' in rows:  # e.g. masks on/off, R1 vs B 2x
-        entry['paired_R1'] = pair_stats(pairs_of(all_rows, [sc], seeds, label, 'R1'))
+      for key, ref, _ in REFERENCES:
+        if label != ref and ref in rows and not (key == 'paired_R1' and label == 'B'):
+          entry[key] = pair_stats(pairs_of(all_rows, [sc], seeds, label, ref))
       res[label] = entry
     res['paper_R1_delta'] = paper_delta(sc)
     out['scenes'][sc] = res
   for label in labels:
     if label == 'B':
       continue
-    # The mean over scenes of each scene's mean delta, and the pooled pair counts.
-    per_scene = {k: [out['scenes'][sc][label]['paired'][k][0] for sc in scenes
+    # The mean over scenes of each scene's mean delta, and the pooled pairs.
+    per_scene = {k: [out['scenes'][sc][label]['paired'][k]['mean'] for sc in scenes
                      if label in out['scenes'][sc] and k in out['scenes'][sc][label]['paired']]
                  for k in METRICS}
-    out['mean'][label] = {'pooled': pair_stats(pairs_of(all_rows, scenes, seeds, label, 'B')),
-                          'pooled_R1': (pair_stats(pairs_of(all_rows, scenes, seeds, label,
-                                                            'R1')) if label != 'R1' else {}),
-                          # Against more compute: the row minus B trained 2x longer.
-                          'pooled_2x': (pair_stats(pairs_of(all_rows, scenes, seeds, label,
-                                                            TWO_X)) if label != TWO_X else {}),
-                          'mean_of_scene_means': {k: tables.mean_std(v)
-                                                  for k, v in per_scene.items() if v},
-                          'scenes': sum(label in all_rows[sc] for sc in scenes)}
+    entry = {'mean_of_scene_means': {k: tables.mean_std(v) for k, v in per_scene.items() if v},
+             'scenes': sum(label in all_rows[sc] for sc in scenes)}
+    for key, ref, _ in REFERENCES:  # 'pooled', 'pooled_ctrl', ... ({} when no pair)
+      entry['pooled' + key[len('paired'):]] = (
+          pair_stats(pairs_of(all_rows, scenes, seeds, label, ref)) if label != ref else {})
+    out['mean'][label] = entry
   paper = [paper_delta(sc) for sc in scenes if paper_delta(sc)]
   out['paper_R1_delta_mean'] = {k: round(float(np.mean([p[k] for p in paper])), 3)
                                 for k in METRICS} if paper else None
@@ -274,15 +312,8 @@ def summarize(all_rows, scenes, seeds):
 
 
 def fmt_pair(p, k, d=2):
-  if k not in p:
-    return ''
-  mean, std, wins, n = p[k]
-  return f'{mean:+.{d}f} +- {std:.{d}f} ({wins}/{n})'
-
-
-def fmt_triple(p):
-  """'dPSNR | dSSIM | dLPIPS' cells of pair_stats output."""
-  return f"{fmt_pair(p, 'psnr')} | {fmt_pair(p, 'ssim', 3)} | {fmt_pair(p, 'lpips_alex', 3)}"
+  """One cell: mean +- std (wins/n), p-value and 95% interval; bold when a gain is shown."""
+  return paired.format_cell(p.get(k, {}), d)
 
 
 # ../shared/REFERENCE_NUMBERS.md: the paper's 3DGS rows are on mip-NeRF 360 (30 views),
@@ -295,50 +326,63 @@ def markdown(summary, scenes, command, sources=(), backbone='nerf'):
   for sc in scenes:
     res = summary['scenes'][sc]
     pd = res['paper_R1_delta']
-    lines += [f'### {sc}', '',
-              '| row | PSNR | SSIM | LPIPS-alex | cum. s | dPSNR (wins) | dSSIM (wins) '
-              '| dLPIPS (wins) | row - R1: dPSNR | dSSIM | dLPIPS |',
-              '|---|---|---|---|---|---|---|---|---|---|---|']
-    for label, e in res.items():
-      if label == 'paper_R1_delta':
-        continue
+    labels = [lb for lb in res if lb != 'paper_R1_delta']
+    refs = [(key, name) for key, ref, name in REFERENCES if ref in labels]
+    lines += [f'### {sc}', '', '| row | PSNR | SSIM | LPIPS-alex | cum. s | '
+              + ' | '.join(f'dPSNR vs {name}' for _, name in refs) + ' |',
+              '|---|---|---|---|---|' + '---|' * len(refs)]
+    for label in labels:
+      e = res[label]
       cell = lambda k, d: f'{e[k][0]:.{d}f} +- {e[k][1]:.{d}f}' if k in e else ''
-      p, q = e.get('paired', {}), e.get('paired_R1', {})
       shown = f"{label} ({', '.join(map(str, e['steps']))} steps)" if 'steps' in e else label
       lines.append(f"| {shown} | {cell('psnr', 2)} | {cell('ssim', 3)} | "
                    f"{cell('lpips_alex', 3)} | {e['seconds'][0]:.0f} | "
-                   f"{fmt_triple(p)} | {fmt_triple(q)} |")
+                   + ' | '.join(fmt_pair(e.get(key, {}), 'psnr') for key, _ in refs) + ' |')
     if pd:
-      lines.append(f"| paper R1 - RegNeRF | | | | | {pd['psnr']:+.2f} | {pd['ssim']:+.3f} | "
-                   f"{pd['lpips_alex']:+.3f} | | | |")
+      lines.append(f"| paper R1 - RegNeRF | | | | | {pd['psnr']:+.2f} |" + ' |' * (len(refs) - 1))
+    lines += ['', f'dSSIM and dLPIPS-alex of {sc}:', '',
+              '| row | ' + ' | '.join(f'dSSIM vs {n} | dLPIPS vs {n}' for _, n in refs[:2])
+              + ' |', '|---|' + '---|---|' * len(refs[:2])]
+    for label in labels:
+      e = res[label]
+      lines.append(f'| {label} | ' + ' | '.join(
+          f"{fmt_pair(e.get(key, {}), 'ssim', 3)} | {fmt_pair(e.get(key, {}), 'lpips_alex', 3)}"
+          for key, _ in refs[:2]) + ' |')
     lines.append('')
-  lines += ['### Over scenes (paired D - B)', '',
-            '| row | scenes | pooled dPSNR (wins) | pooled dSSIM (wins) | pooled dLPIPS (wins) '
-            '| mean of scene means dPSNR | row - R1: dPSNR (wins) | dSSIM | dLPIPS '
-            '| row - B 2x: dPSNR (wins) |',
-            '|---|---|---|---|---|---|---|---|---|---|']
+  pooled_refs = [(key, ref, name) for key, ref, name in REFERENCES
+                 if any(ref in summary['scenes'][sc] for sc in scenes)]
+  lines += ['### Over scenes (pooled pairs)', '',
+            '| row | scenes | mean of scene means dPSNR vs B | '
+            + ' | '.join(f'dPSNR vs {name}' for _, _, name in pooled_refs)
+            + ' | dSSIM vs B | dLPIPS vs B |',
+            '|---|---|---|' + '---|' * len(pooled_refs) + '---|---|']
   for label, e in summary['mean'].items():
-    p, m, q = e['pooled'], e['mean_of_scene_means'], e.get('pooled_R1', {})
+    m = e['mean_of_scene_means']
     mp = f"{m['psnr'][0]:+.2f} +- {m['psnr'][1]:.2f}" if 'psnr' in m else ''
-    lines.append(f"| {label} | {e['scenes']} | {fmt_triple(p)} | {mp} | {fmt_triple(q)} | "
-                 f"{fmt_pair(e.get('pooled_2x', {}), 'psnr')} |")
+    lines.append(f"| {label} | {e['scenes']} | {mp} | " + ' | '.join(
+        fmt_pair(e.get('pooled' + key[len('paired'):], {}), 'psnr')
+        for key, _, _ in pooled_refs)
+        + f" | {fmt_pair(e['pooled'], 'ssim', 3)} | {fmt_pair(e['pooled'], 'lpips_alex', 3)} |")
+  pad = ' |' * (len(pooled_refs) + 1)
   if summary['paper_R1_delta_mean']:
     pm = summary['paper_R1_delta_mean']
-    lines.append(f"| paper R1 - RegNeRF (these scenes) | | {pm['psnr']:+.2f} | {pm['ssim']:+.3f} | "
-                 f"{pm['lpips_alex']:+.3f} | | | | | |")
+    lines.append(f"| paper R1 - RegNeRF (these scenes) | | {pm['psnr']:+.2f} |{pad} "
+                 f"{pm['ssim']:+.3f} | {pm['lpips_alex']:+.3f} |")
   if backbone == 'gaussians':
     b, r1 = PAPER_3DGS_360
     lines.append(f'| paper R1 - 3DGS (mip-NeRF 360, 30 views: no LLFF 3DGS rows) | | '
-                 f'{r1[0] - b[0]:+.2f} | {r1[1] - b[1]:+.3f} | {r1[2] - b[2]:+.3f} | | | | | |')
+                 f'{r1[0] - b[0]:+.2f} |{pad} {r1[1] - b[1]:+.3f} | {r1[2] - b[2]:+.3f} |')
     lines += ['', 'Backbone: 3D Gaussian Splatting. The "paper R1 - RegNeRF" rows are the '
               "paper's LLFF deltas on its NeRF backbone, for scale only."]
-  lines += ['', 'dX: D minus B of the same (scene, seed), mean +- std over pairs; (wins/n): '
-            'pairs where D beats B (higher PSNR / SSIM, lower LPIPS). "row - R1": the row '
-            'minus R1 of the same (scene, seed), wins where the row beats R1 (R1 + masks '
-            'against R1 without; B 2x steps against R1 at about equal time). "row - B 2x": the '
-            'row minus B trained 2x longer (the control for more compute), same pairing. '
-            'Two identical '
-            'runs differ by 0.2-0.5 dB, so a mean delta inside its std is no gain.', '',
+  lines += ['', 'Each delta: the row minus the reference row of the same (scene, seed), '
+            'mean +- std over pairs (wins/n: pairs where the row is better: higher PSNR / '
+            'SSIM, lower LPIPS), the two-sided paired t-test p-value and the paired '
+            'bootstrap 95% interval of the mean delta. **Bold**: a gain is shown (the '
+            'interval excludes 0 and p < 0.05); anything else is not a gain. References: '
+            "B; D's seed K 0 = B's training at D's seed (Config.d_seed), i.e. D without "
+            "pseudo-views, the control that differs from R1 in the pseudo-views alone; "
+            "D's seed 2x = the same at 2x B's steps; B 2x = B trained 2x longer (the "
+            'control for more compute); R1 (e.g. masks on against off).', '',
             'Command:', '', f'    {command}', '']
   if sources:
     lines += ['Merged from the tables of:', ''] + [f'    {c}' for c in sources] + ['']
@@ -357,8 +401,8 @@ def plot(summary, scenes, path):
         p = summary['scenes'][sc].get(label, {}).get('paired', {})
         if k in p:
           xs.append(j + (i - len(labels) / 2 + 0.5) * width)
-          ys.append(p[k][0])
-          es.append(p[k][1])
+          ys.append(p[k]['mean'])
+          es.append(p[k]['std'])
       ax.bar(xs, ys, width, yerr=es, capsize=2, label=label)
     pd = [summary['scenes'][sc]['paper_R1_delta'] for sc in scenes]
     ax.scatter([j for j, p in enumerate(pd) if p], [p[k] for p in pd if p], marker='*',

@@ -36,6 +36,13 @@ def check_config(c):
          f'Config.dataset_loader={c.dataset_loader!r} (llff, transforms, blender or '
          'procedural)')
   _check(c.test_stride >= 1, f'Config.test_stride={c.test_stride} must be >= 1')
+  _check(c.blender_split in ('standard', 'linspace'),
+         f'Config.blender_split={c.blender_split!r} (standard or linspace)')
+  _check(c.init_seed >= -1, f'Config.init_seed={c.init_seed} must be >= 0 (or -1: seed)')
+  _check(c.outside_box in ('clamp', 'empty'),
+         f'Config.outside_box={c.outside_box!r} (clamp or empty)')
+  _check(c.d_seed in ('offset', 'same_init', 'same'),
+         f'Config.d_seed={c.d_seed!r} (offset, same_init or same)')
   _check(not c.piecewise_spacing or c.near < 1. < c.far,
          f'Config.piecewise_spacing needs near < 1 < far, not near={c.near}, '
          f'far={c.far}')
@@ -84,6 +91,12 @@ def check_config(c):
   _check(c.sampler != 'proposal' or c.stop_level_grad,
          'Config.sampler=\'proposal\' needs Config.stop_level_grad = True (the '
          'proposal is trained by the interlevel loss alone)')
+  _check(c.near_camera_loss_mult >= 0. and c.near_camera_radius >= 0.,
+         f'Config.near_camera_loss_mult={c.near_camera_loss_mult} and '
+         f'near_camera_radius={c.near_camera_radius} must be >= 0')
+  _check(c.near_camera_loss_mult == 0. or not c.use_ndc,
+         'Config.near_camera_loss_mult > 0 needs use_ndc = False (camera centres are in '
+         'world space)')
   _check(c.distortion_loss_mult >= 0.,
          f'Config.distortion_loss_mult={c.distortion_loss_mult} must be >= 0')
   _check(c.proposal_samples >= 2,

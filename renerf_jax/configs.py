@@ -68,6 +68,11 @@ class Config:
   # Blender layout (transforms_test.json): every test_stride-th test frame is a test view
   # (the few-shot Blender protocol of DietNeRF / FreeNeRF: 8, i.e. 25 of lego's 200).
   test_stride: int = 1
+  # Blender layout: which n_input_views frames of transforms_train.json train.
+  # 'standard': the few-shot split of DietNeRF, RegNeRF, FreeNeRF, FSGS and DNGaussian
+  # (train ids 26, 86, 2, 55, 75, 93, 16, 73; the first n_input_views of them);
+  # 'linspace': evenly spaced over the train frames (this project's split before issue 49).
+  blender_split: str = 'standard'
   white_bkgd: bool = False  # Composite on white (Blender).
   use_ndc: bool = True  # NDC space for forward-facing scenes; never for 360 scenes.
   near: float = 0.  # Near plane (NDC: 0).
@@ -84,7 +89,9 @@ class Config:
   procedural_size: Tuple[int, int] = (48, 64)  # (H, W) of the embedded scene.
   procedural_views: int = 17  # Number of images the embedded scene renders.
   # --- optimisation ---
-  seed: int = 0
+  seed: int = 0  # Seeds the per-step draws (rays, sample jitter, density noise) and,
+  # unless init_seed >= 0, the parameters' initialisation.
+  init_seed: int = -1  # The initialisation's own seed; -1: Config.seed.
   max_steps: int = 69768  # RegNeRF llff3: 69768.
   batch_size: int = 4096  # Rays per step (real/pseudo views).
   lr_init: float = 2e-3
@@ -183,6 +190,11 @@ class Config:
   # mip-NeRF 360's distortion loss on the last level's weights of every ray rendered in a
   # step (the batch and the random-pose patches); 0: off (nothing computed).
   distortion_loss_mult: float = 0.
+  # A near-camera density penalty (regularizers.near_camera_weight): the batch's mean
+  # rendering weight within near_camera_radius (world units) of a training camera's
+  # centre, times this (0: off, nothing computed). Needs use_ndc = False.
+  near_camera_loss_mult: float = 0.
+  near_camera_radius: float = 0.15
   # --- grid backbone (Config.field = 'grid') ---
   grid_levels: int = 12  # Resolution levels of the multi-resolution grid.
   grid_base_res: int = 16  # Coarsest resolution (vertices per axis - 1).
@@ -193,6 +205,9 @@ class Config:
   grid_init_scale: float = 1e-4  # Uniform init range of the tables.
   grid_box: Tuple[Tuple[float, ...], Tuple[float, ...]] = ((-1., -1., -1.), (1., 1., 1.))
   # Box the grid covers: the NDC cube for LLFF; about +-1.5 for NeRF-synthetic.
+  outside_box: str = 'clamp'  # Density at samples outside grid_box: 'clamp' (the fields
+  # clamp the point onto the box's faces: LLFF's NDC rays leave the box sideways) or
+  # 'empty' (0: a bounded scene's box holds it all, as Instant-NGP's aabb; lego8.gin).
   # --- sampler ---
   sampler: str = 'coarse_fine'
   # 'coarse_fine' (mip-NeRF: every level renders colour with the one field, the coarse
@@ -223,6 +238,11 @@ class Config:
   # (keep to the end) or 'late' (only the last K steps).
   renerf_init: str = _f('reset', 'd_training')
   # 'reset' (D from scratch, the method) or 'continue' (from B).
+  d_seed: str = _f('offset', 'd_training')
+  # D's seed in round r (renerf.round_config): 'offset' (seed + 1000 r for its
+  # initialisation and its draws: a model as different from B as another seed), 'same_init'
+  # (B's initialisation, draws from seed + 1000 r) or 'same' (B's seed for both: D differs
+  # from B only by the pseudo-views, so D without pseudo-views is B bit for bit).
   interp_factors: str = _f('7x', 'pseudo_poses')
   # Preset name (2x, 3x, 3x_b, 3x_c, 4x, 5x, 7x, 11x) or
   # comma-separated factors, e.g. '0.25,0.5'.

@@ -119,8 +119,8 @@ def render_rays(config, params, rays, key, train: bool,
     if offsets is not None:
       means = means + offsets(level, means)
     if density_only:
-      raw_density = make_proposal(config).apply({'params': params['proposal']},
-                                                materialize(means))
+      means = materialize(means)
+      raw_density = make_proposal(config).apply({'params': params['proposal']}, means)
       raw_rgb = None
     else:
       means, covs = materialize((means, covs))
@@ -132,16 +132,43 @@ def render_rays(config, params, rays, key, train: bool,
     if raw_rgb is None:
       _, density = raw_to_outputs(0., raw_density, config.rgb_padding,
                                   config.density_bias, config.density_activation)
+      density = empty_outside_box(config, means, density)
       out = mip.volumetric_weights(density, t_vals, rays.directions)
     else:
       rgb, density = raw_to_outputs(raw_rgb, raw_density, config.rgb_padding,
                                     config.density_bias, config.density_activation)
+      density = empty_outside_box(config, means, density)
       out = mip.volumetric_rendering(rgb, density, t_vals, rays.directions,
                                      config.white_bkgd)
     out.update(t_vals=t_vals, density=density)
     weights = out['weights']
     results.append(out)
   return results
+
+
+def empty_outside_box(config, means, density):
+  """Density with samples outside Config.grid_box set to 0 (Config.outside_box = 'empty').
+
+  The grid fields clamp a point outside their box onto the box's faces, so with 'clamp'
+  (the default) a sample outside gets the density of the nearest face cell: on a bounded
+  scene whose cameras lie outside the box (Blender), that copies the faces' density along
+  every ray to the camera, and floaters appear there (experiments/results/
+  seed_matched_fox_lego). 'empty' makes the scene empty outside its box, as Instant-NGP
+  does by sampling only inside its aabb. Left alone with Config.contraction (every
+  contracted point is inside the box).
+
+  Args:
+    config: static Config. means: [..., S, 3] sample positions as the fields see them.
+    density: [..., S] densities.
+
+  Returns:
+    density, zeroed outside the box when Config.outside_box = 'empty'.
+  """
+  if config.outside_box != 'empty' or config.contraction:
+    return density
+  lo, hi = (jnp.asarray(b, density.dtype) for b in config.grid_box)
+  inside = jnp.all((means >= lo) & (means <= hi), axis=-1)
+  return jnp.where(inside, density, 0.)
 
 
 def level_samples(config):

@@ -45,8 +45,17 @@ def initial_state() -> RoundState:
 
 
 def round_config(config, r):
-  """The Config of round r's training: a fresh seed per round (D starts from scratch)."""
-  return dataclasses.replace(config, seed=config.seed + 1000 * r)
+  """The Config of round r's training (D starts from scratch; Config.d_seed).
+
+  'offset': seed + 1000 r (and init_seed + 1000 r when set) for round r >= 1;
+  'same_init': those draws with B's initialisation (init_seed = B's); 'same': B's Config.
+  """
+  if r == 0 or config.d_seed == 'same':
+    return config
+  b_init = config.init_seed if config.init_seed >= 0 else config.seed
+  init = b_init if config.d_seed == 'same_init' else (
+      config.init_seed + 1000 * r if config.init_seed >= 0 else -1)
+  return dataclasses.replace(config, seed=config.seed + 1000 * r, init_seed=init)
 
 
 def regularizer_poses(config, scene):
@@ -67,7 +76,7 @@ def regularizer_poses(config, scene):
 def make_pools(config, scene, pseudo: Optional[PseudoViews]):
   """The NeRF backbone's training pools: real views, pseudo-views (if any: 'mixed' with
   the real rays for Config.pseudo_mix='pixels', 'pseudo' alone for 'fraction'), random
-  poses (depth TV)."""
+  poses (depth TV), the training cameras' centres (the near-camera penalty)."""
   pools = {'real': ray_pool(scene, scene.train_idx)}
   if pseudo is not None:
     pool = ray_pool(scene, None, images=pseudo.images, masks=pseudo.masks,
@@ -79,6 +88,9 @@ def make_pools(config, scene, pseudo: Optional[PseudoViews]):
   poses = regularizer_poses(config, scene)
   if poses is not None:
     pools['random_poses'] = poses
+  if config.near_camera_loss_mult > 0:
+    pools['camera_centres'] = jnp.asarray(scene.poses[scene.train_idx][:, :3, 3],
+                                          jnp.float32)
   return pools
 
 

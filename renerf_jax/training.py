@@ -87,6 +87,18 @@ def make_optimizer(config):
   return optax.chain(*parts)
 
 
+def init_and_step_keys(config):
+  """(key of the parameters' initialisation, base key of the per-step draws).
+
+  Both are split from PRNGKey(Config.seed); with Config.init_seed >= 0 the initialisation
+  key is split from PRNGKey(init_seed) instead (init_seed == seed gives the same keys).
+  """
+  k_init, base_key = jax.random.split(jax.random.PRNGKey(config.seed))
+  if config.init_seed >= 0:
+    k_init = jax.random.split(jax.random.PRNGKey(config.init_seed))[0]
+  return k_init, base_key
+
+
 def init_state(config, key, params=None) -> TrainState:
   """A fresh TrainState (new parameters unless `params` is given)."""
   if params is None:
@@ -210,7 +222,7 @@ def _feature_mask(step, config):
   return frequency_mask(config, step / (config.freq_reg_end * config.max_steps))
 
 
-def loss_fn(params, config, cam, batch, patches, step, key):
+def loss_fn(params, config, cam, batch, patches, step, key, centres=None):
   """Total loss and statistics for one batch.
 
   Args:
@@ -218,6 +230,7 @@ def loss_fn(params, config, cam, batch, patches, step, key):
     batch: {'rays' Rays [B], 'rgb' [B, 3], 'lossmult' [B, 1]}.
     patches: Rays [P, ps, ps] from random poses, or None (depth TV off).
     step: scalar step. key: PRNG key.
+    centres: [C, 3] training camera centres (the near-camera penalty), or None.
 
   Returns:
     (loss, stats dict).
@@ -259,6 +272,13 @@ def loss_fn(params, config, cam, batch, patches, step, key):
                for n, (lv, r) in zip(counts, parts)) / sum(counts)
     loss = loss + config.distortion_loss_mult * dist
     stats['distortion'] = dist
+  if config.near_camera_loss_mult > 0:
+    fine = levels[-1]
+    near = regularizers.near_camera_weight(rays.origins, rays.directions, fine['t_vals'],
+                                           fine['weights'], centres,
+                                           config.near_camera_radius)
+    loss = loss + config.near_camera_loss_mult * near
+    stats['near_camera'] = near
   if config.occ_reg_mult > 0:
     occ = sum(regularizers.occlusion_loss(lv['density'], config.occ_reg_range)
               for lv in levels[-colour_levels(config):])
@@ -276,7 +296,8 @@ def train_step(config, cam: Camera, pseudo_on: bool, state: TrainState, pools, k
     config: static Config. cam: static Camera.
     pseudo_on: static; draw pseudo-view rays at this step (Config.pseudo_mix says how).
     state: TrainState.
-    pools: {'real': pool, 'random_poses': [P, 3, 4] (depth TV), and while pseudo-views
+    pools: {'real': pool, 'random_poses': [P, 3, 4] (depth TV), 'camera_centres' [C, 3]
+      (the near-camera penalty), and while pseudo-views
       are used 'mixed' (mixed_pool, pseudo_mix='pixels') or 'pseudo' ('fraction')}.
     key: PRNG key of this step.
 
@@ -294,7 +315,8 @@ def train_step(config, cam: Camera, pseudo_on: bool, state: TrainState, pools, k
                                 config.patch_size, cam)
   step = state.step.astype(jnp.float32)
   (_, stats), grads = jax.value_and_grad(loss_fn, has_aux=True)(
-      state.params, config, cam, batch, patches, step, k_render)
+      state.params, config, cam, batch, patches, step, k_render,
+      pools.get('camera_centres'))
   finite = jnp.isfinite(stats['loss']) & jnp.all(jnp.array(
       [jnp.all(jnp.isfinite(g)) for g in jax.tree_util.tree_leaves(grads)]))
   updates, new_opt = make_optimizer(config).update(grads, state.opt_state, state.params)
@@ -347,8 +369,7 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
     raise ValueError(f'Config.batch_size={config.batch_size} is not divisible by the '
                      f'{n_dev} devices')
   has_pseudo = ('pseudo' in pools or 'mixed' in pools) and window[1] > window[0]
-  base_key = jax.random.PRNGKey(config.seed)
-  k_init, base_key = jax.random.split(base_key)
+  k_init, base_key = init_and_step_keys(config)
   state, train_seconds, curve = rundir.resume_training(
       out_dir, init_state(config, k_init, init_params))
   state = jax.device_put(state, replicated_sharding())
@@ -372,7 +393,8 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
       fields = {'loss': float(stats['loss']), 'psnr': float(stats['psnr']),
                 'lr': float(stats['lr']), 'nan_skips': int(state.nan_skips),
                 'pseudo_rays': int(stats['pseudo_rays'])}
-      for k in ('depth_tv', 'depth_tv_weight', 'occ', 'interlevel', 'distortion'):
+      for k in ('depth_tv', 'depth_tv_weight', 'occ', 'interlevel', 'distortion',
+                'near_camera'):
         if k in stats:
           fields[k] = float(stats[k])
       log.record(done, state, fields)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import REPO, tree_files
+from experiments import renerf_scenes
 
 TINY = ['Config.procedural_size = (32, 40)', 'Config.max_steps = 12',
         'Config.batch_size = 64', 'Config.num_samples = 8', 'Config.net_depth = 2',
@@ -198,7 +199,19 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   rows = result['rows']['procedural']
   eq = json.loads((out / 's' / 'procedural' / 'equal_time.json').read_text())
   assert set(rows) == {'B', 'R1', 'R2', 'R3', 'R1 + masks', 'B 2x steps',
-                       'B equal time'}
+                       'B equal time', renerf_scenes.CONTROL, renerf_scenes.CONTROL_2X}
+  # The seed-matched controls are B's training at D's seed (Config.d_seed 'offset':
+  # seed + 1000) at B's and at 2x B's steps, with no rounds.
+  for label, steps in ((renerf_scenes.CONTROL, 12), (renerf_scenes.CONTROL_2X, 24)):
+    for s in (0, 1):
+      saved = json.loads((out / 's' / 'procedural' / label / f'seed{s}' /
+                          'config.json').read_text())
+      assert (saved['seed'], saved['max_steps'], saved['num_rounds']) == (s + 1000, steps, 0)
+  ctrl = result['summary']['scenes']['procedural']['R1']['paired_ctrl']['psnr']
+  assert ctrl['mean'] == pytest.approx(np.mean(
+      [rows['R1'][str(s)]['psnr'] - rows[renerf_scenes.CONTROL][str(s)]['psnr']
+       for s in (0, 1)]))
+  assert set(ctrl) >= {'p', 'ci', 'shown'}
   assert {m['steps'] for m in rows['B equal time'].values()} == {eq['max_steps']}
   # The masks row is R1 trained from the same B: its round_0 is the Re-Nerfing run's.
   root = out / 's' / 'procedural'
@@ -208,16 +221,17 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   # Paired deltas are D minus B of the same seed; wins count the pairs D beats B in.
   paired = result['summary']['scenes']['procedural']['R1']['paired']
   deltas = [rows['R1'][str(s)]['psnr'] - rows['B'][str(s)]['psnr'] for s in (0, 1)]
-  assert paired['psnr'][0] == pytest.approx(np.mean(deltas))
-  assert paired['psnr'][2] == sum(d > 0 for d in deltas) and paired['psnr'][3] == 2
-  assert result['summary']['mean']['B 2x steps']['pooled']['psnr'][3] == 2
+  assert paired['psnr']['mean'] == pytest.approx(np.mean(deltas))
+  assert paired['psnr']['wins'] == sum(d > 0 for d in deltas) and paired['psnr']['n'] == 2
+  assert result['summary']['mean']['B 2x steps']['pooled']['psnr']['n'] == 2
   # Rows other than B and R1 are also paired with R1 (masks on vs off, 2x vs R1).
   vs_r1 = result['summary']['scenes']['procedural']['R1 + masks']['paired_R1']
-  assert vs_r1['psnr'][0] == pytest.approx(np.mean(
+  assert vs_r1['psnr']['mean'] == pytest.approx(np.mean(
       [rows['R1 + masks'][str(s)]['psnr'] - rows['R1'][str(s)]['psnr'] for s in (0, 1)]))
   assert 'paired_R1' not in result['summary']['scenes']['procedural']['R1']
   md = (out / 's.md').read_text()
   assert 'B 2x steps' in md and 'wins' in md and (out / 's.png').stat().st_size > 0
+  assert "dPSNR vs D's seed K 0" in md and 'paired t-test' in md
   assert f"| B equal time ({eq['max_steps']} steps) |" in md
   # --table: a subset of the same runs (reused, nothing trained) into other files.
   before = tree_files(out / 's')
@@ -237,14 +251,16 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
                        text=True, timeout=600, check=False)
   assert bad.returncode == 2
   assert 'error: --scenes_2x names fern, not in --scenes (procedural)' in bad.stderr
-  # --no_r1 (the oracle table): B and the --variant rows, R1 left out even where it exists.
+  # --no_r1 (the oracle table): B, the --variant rows and the control at D's seed (the
+  # variants are D's), R1 left out even where it exists.
   i = cmd.index('--rounds_scenes')
   no_r1 = cmd[:i] + cmd[i + 2:] + ['--table', 'n', '--seeds', '0', '--no_r1', '--no_2x']
   sub = subprocess.run(no_r1, cwd=REPO, capture_output=True, text=True, timeout=600,
                        check=False)
   assert sub.returncode == 0, sub.stderr[-3000:]
   n_rows = json.loads((out / 'n.json').read_text())['rows']['procedural']
-  assert set(n_rows) == {'B', 'R1 + masks'} and n_rows['B'] == {'0': rows['B']['0']}
+  assert set(n_rows) == {'B', 'R1 + masks', renerf_scenes.CONTROL}
+  assert n_rows['B'] == {'0': rows['B']['0']}
   assert tree_files(out / 's') == before
   bad = subprocess.run(cmd + ['--no_r1'], cwd=REPO, capture_output=True, text=True,
                        timeout=600, check=False)
@@ -344,16 +360,18 @@ def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_ba
   m = lambda p: {'psnr': p, 'ssim': 0.5, 'lpips_alex': 0.3, 'cumulative_seconds': 10.}
   rows = {'fern': {'B': {0: m(14.), 1: m(15.)}, 'R1': {0: m(14.5), 1: m(14.9)}}}
   summary = renerf_scenes.summarize(rows, ['fern'], [0, 1])
-  assert summary['scenes']['fern']['R1']['paired']['psnr'][:3] == pytest.approx(
+  got = summary['scenes']['fern']['R1']['paired']['psnr']
+  assert (got['mean'], got['std'], got['wins']) == pytest.approx(
       (0.2, np.std([0.5, -0.1], ddof=1), 1))
   assert summary['mean']['R1']['pooled_2x'] == {}  # no B 2x row: nothing to pair with
   with_2x = dict(rows['fern'], **{'B 2x steps': {0: m(14.2), 1: m(15.4)}})
   s2 = renerf_scenes.summarize({'fern': with_2x}, ['fern'], [0, 1])
   # R1 - B 2x per seed: +0.3 and -0.5; one pair of two beats the longer B.
-  assert s2['mean']['R1']['pooled_2x']['psnr'][:3] == pytest.approx(
+  got = s2['mean']['R1']['pooled_2x']['psnr']
+  assert (got['mean'], got['std'], got['wins']) == pytest.approx(
       (-0.1, np.std([0.3, -0.5], ddof=1), 1))
   assert s2['mean']['B 2x steps']['pooled_2x'] == {}
-  assert '| -0.10 +- 0.57 (1/2) |' in renerf_scenes.markdown(s2, ['fern'], 'cmd')
+  assert '| -0.10 +- 0.57 (1/2), p 0.84, [' in renerf_scenes.markdown(s2, ['fern'], 'cmd')
   gs = renerf_scenes.markdown(summary, ['fern'], 'cmd', backbone='gaussians')
   assert '| paper R1 - 3DGS (mip-NeRF 360, 30 views: no LLFF 3DGS rows) | | +0.81 |' in gs
   assert 'paper R1 - 3DGS' not in renerf_scenes.markdown(summary, ['fern'], 'cmd')
@@ -369,3 +387,24 @@ def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_ba
   merged, seeds, _, _, backbone = renerf_scenes.merged_rows(paths)
   assert backbone == 'gaussians' and seeds == [0, 1]
   assert merged['fern']['R1'] == rows['fern']['R1']
+
+
+def test_scenes_table_with_d_sharing_b_seed_copies_b_as_its_controls(tmp_path):
+  """Config.d_seed = 'same': the seed-matched controls are B and B 2x themselves, copied
+  bit for bit (nothing trained), and R1 is paired with them."""
+  out = tmp_path / 'results'
+  cmd = ([sys.executable, '-m', 'experiments.renerf_scenes', '--name', 'same', '--config',
+          'gin_configs/demo.gin', '--out', str(out), '--seeds', '0', '--scenes',
+          'procedural', "--gin_bindings=Config.dataset_loader='procedural'",
+          "--gin_bindings=Config.d_seed='same'"] + [f'--gin_bindings={b}' for b in TINY])
+  res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=900,
+                       check=False)
+  assert res.returncode == 0, res.stderr[-3000:]
+  root = out / 'same' / 'procedural'
+  params = lambda label, r=0: (root / label / 'seed0' / f'round_{r}' /
+                               'params.msgpack').read_bytes()
+  assert params(renerf_scenes.CONTROL) == params('Re-Nerfing')
+  assert params(renerf_scenes.CONTROL_2X) == params(renerf_scenes.TWO_X)
+  assert params('Re-Nerfing', 1) != params('Re-Nerfing')  # D trained on pseudo-views
+  rows = json.loads((out / 'same.json').read_text())['rows']['procedural']
+  assert rows[renerf_scenes.CONTROL]['0']['psnr'] == rows['B']['0']['psnr']

@@ -64,3 +64,38 @@ def test_materialize_changes_no_compiled_result(monkeypatch):
     for k in ref:
       assert np.all(np.isfinite(ref[k])), k
       np.testing.assert_allclose(level[k], ref[k], rtol=1e-5, atol=1e-5, err_msg=k)
+
+
+def test_outside_box_empty_leaves_no_weight_outside_the_box():
+  """Config.outside_box = 'empty': samples outside grid_box have density 0 (so no weight)
+  while 'clamp' (the default) gives them the faces' density; inside, the two agree."""
+  # pylint: disable=g-import-not-at-top
+  from conftest import tiny_config
+  from renerf_jax import cameras, model
+  from renerf_jax.fields import init_field_params
+  # pylint: enable=g-import-not-at-top
+  box = ((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5))
+  kw = dict(field='grid', grid_levels=2, grid_max_res=8, grid_base_res=4, use_ndc=False,
+            near=0.5, far=4., grid_box=box, density_bias=3.)
+  origins = jnp.tile(jnp.array([[0., 0., -2.]]), (4, 1))
+  dirs = jnp.array([[0., 0., 1.], [0.3, 0., 1.], [0., -0.2, 1.], [1., 1., 0.2]])
+  dirs = dirs / jnp.linalg.norm(dirs, axis=-1, keepdims=True)
+  ones = jnp.ones((4, 1))
+  rays = cameras.Rays(origins=origins, directions=dirs, viewdirs=dirs, radii=ones * 1e-3,
+                      near=ones * 0.5, far=ones * 4.)
+  out = {}
+  for mode in ('clamp', 'empty'):
+    config = tiny_config(outside_box=mode, **kw)
+    params = init_field_params(config, jax.random.PRNGKey(0))
+    fine = model.render_rays(config, params, rays, jax.random.PRNGKey(1), train=False)[-1]
+    t = fine['t_vals']
+    mid = 0.5 * (t[:, 1:] + t[:, :-1])
+    pts = np.asarray(origins[:, None] + mid[..., None] * dirs[:, None])
+    outside = np.any((pts < -0.5) | (pts > 0.5), axis=-1)
+    out[mode] = (np.asarray(fine['density']), outside)
+  dens, outside = out['empty']
+  assert outside.any() and (~outside).any()
+  assert np.all(dens[outside] == 0.) and np.all(np.isfinite(dens))
+  assert np.all(out['clamp'][0][out['clamp'][1]] > 0.)  # the faces' density leaks out
+  # The ray that misses the box entirely renders nothing with 'empty'.
+  assert outside[3].all() and np.all(dens[3] == 0.)

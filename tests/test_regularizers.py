@@ -99,3 +99,59 @@ def test_freenerf_regularisers_train_on_both_fields(field):
   for i in range(2):
     state, stats = training.train_step(config, cam, False, state, pools, jax.random.PRNGKey(i))
   assert bool(stats['finite']) and float(stats['occ']) >= 0.
+
+
+def test_near_camera_weight_counts_weight_within_the_radius_only():
+  """The penalty is the mean over rays of the weight at midpoints within the radius of
+  any centre: by hand on two rays; 0 with radius 0, no centre near, or zero weights."""
+  origins = jnp.array([[0., 0., 0.], [0., 0., 0.]])
+  dirs = jnp.array([[0., 0., 1.], [2., 0., 0.]])  # unnormalised: distance = 2 t on ray 2
+  t = jnp.tile(jnp.array([[0., 1., 2., 3.]]), (2, 1))  # midpoints 0.5, 1.5, 2.5
+  w = jnp.array([[0.2, 0.3, 0.5], [0.1, 0.6, 0.3]])
+  centres = jnp.array([[0., 0., 1.4], [10., 10., 10.]])
+  # Ray 1: midpoint 1.5 is 0.1 from the first centre (weight 0.3). Ray 2's points
+  # (1, 0, 0), (3, 0, 0), (5, 0, 0) are >= 1.7 from it: 0.
+  got = regularizers.near_camera_weight(origins, dirs, t, w, centres, 0.5)
+  np.testing.assert_allclose(float(got), 0.3 / 2, rtol=1e-6)
+  # A radius of 1.2 also takes ray 1's 0.5 (0.9 away) and 2.5 (1.1 away).
+  np.testing.assert_allclose(float(regularizers.near_camera_weight(
+      origins, dirs, t, w, centres, 1.2)), 1.0 / 2, rtol=1e-6)
+  assert float(regularizers.near_camera_weight(origins, dirs, t, w, centres, 0.)) == 0.
+  assert float(regularizers.near_camera_weight(origins, dirs, t, w, centres[1:], 0.5)) == 0.
+  assert float(regularizers.near_camera_weight(origins, dirs, t, 0. * w, centres, 9.)) == 0.
+  # Zero-length intervals and huge coordinates stay finite.
+  flat_t = jnp.zeros((2, 4))
+  huge = regularizers.near_camera_weight(origins * 1e30, dirs, flat_t, w, centres, 0.5)
+  assert np.isfinite(float(huge))
+
+
+def test_near_camera_loss_in_training_reaches_the_loss_and_trains():
+  """Off: no statistic and no pool. On: the loss grows by mult x the statistic, and a few
+  steps train with finite losses; NDC configs refuse it in one line."""
+  import dataclasses  # pylint: disable=g-import-not-at-top
+  from renerf_jax import renerf  # pylint: disable=g-import-not-at-top
+  from renerf_jax.configs import Config  # pylint: disable=g-import-not-at-top
+  from renerf_jax.errors import ConfigError  # pylint: disable=g-import-not-at-top
+  config = tiny_config(use_ndc=False, near=0.05, far=6., depth_tv_loss_mult=0.,
+                       anneal_nearfar=False, max_steps=6)
+  scene = load_scene(config)
+  assert 'camera_centres' not in renerf.make_pools(config, scene, None)
+  # The embedded scene starts its rays 1.2 from the camera: a radius of 1.6 reaches them.
+  on_cfg = dataclasses.replace(config, near_camera_loss_mult=2., near_camera_radius=1.6)
+  pools = renerf.make_pools(on_cfg, scene, None)
+  np.testing.assert_allclose(pools['camera_centres'],
+                             scene.poses[scene.train_idx][:, :3, 3], atol=1e-6)
+  cam = training.Camera.of(scene)
+  batch = training.sample_from_pool(pools['real'], jax.random.PRNGKey(1), config.batch_size)
+  params = training.init_state(config, jax.random.PRNGKey(0)).params
+  key = jax.random.PRNGKey(5)
+  off, stats_off = training.loss_fn(params, config, cam, batch, None, 10., key)
+  on, stats_on = training.loss_fn(params, on_cfg, cam, batch, None, 10., key,
+                                  pools['camera_centres'])
+  assert 'near_camera' not in stats_off and float(stats_on['near_camera']) > 0.
+  np.testing.assert_allclose(float(on), float(off) + 2. * float(stats_on['near_camera']),
+                             rtol=1e-5)
+  result = training.train_model(on_cfg, scene, None, pools, show_progress=False)
+  assert int(result.state.step) == 6 and int(result.state.nan_skips) == 0
+  with pytest.raises(ConfigError, match='needs use_ndc = False'):
+    Config(near_camera_loss_mult=1.)

@@ -295,3 +295,34 @@ def test_synthesis_charges_the_seconds_its_render_and_hessian_functions_report()
   pv, timing, _ = renerf.synthesize(config, scene, None, render_fn=fake)
   assert pv.images.shape == (2, h, w, 3) and np.all(pv.images == .25)
   assert timing['render_seconds'] >= 200. and timing['seconds'] >= timing['render_seconds']
+
+
+def test_round_config_d_seed_policies_and_init_seed_keys():
+  """Config.d_seed: 'offset' gives D seed + 1000 r for its draws and its initialisation,
+  'same_init' B's initialisation with new draws, 'same' B's Config; Config.init_seed
+  seeds the initialisation alone (equal to seed: the same keys as unset)."""
+  from renerf_jax import training  # pylint: disable=g-import-not-at-top
+  from renerf_jax.configs import Config  # pylint: disable=g-import-not-at-top
+  b = Config(seed=3)
+  assert renerf.round_config(b, 0) == b
+  d = renerf.round_config(b, 2)
+  assert (d.seed, d.init_seed) == (2003, -1)
+  d = renerf.round_config(Config(seed=3, d_seed='same_init'), 1)
+  assert (d.seed, d.init_seed) == (1003, 3)
+  assert renerf.round_config(Config(seed=3, d_seed='same'), 1) == Config(seed=3,
+                                                                         d_seed='same')
+  d = renerf.round_config(Config(seed=3, init_seed=7), 1)
+  assert (d.seed, d.init_seed) == (1003, 1007)
+  d = renerf.round_config(Config(seed=3, init_seed=7, d_seed='same_init'), 1)
+  assert (d.seed, d.init_seed) == (1003, 7)
+  keys = lambda c: [np.asarray(k) for k in training.init_and_step_keys(c)]
+  ref = np.asarray(jax.random.split(jax.random.PRNGKey(3)))
+  np.testing.assert_array_equal(np.stack(keys(b)), ref)
+  np.testing.assert_array_equal(np.stack(keys(Config(seed=3, init_seed=3))), ref)
+  k_init, k_step = keys(Config(seed=9, init_seed=3))
+  np.testing.assert_array_equal(k_init, ref[0])
+  np.testing.assert_array_equal(k_step, np.asarray(jax.random.split(jax.random.PRNGKey(9)))[1])
+  with pytest.raises(ConfigError, match="Config.d_seed='new'"):
+    Config(d_seed='new')
+  with pytest.raises(ConfigError, match='Config.init_seed=-2'):
+    Config(init_seed=-2)

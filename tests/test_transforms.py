@@ -227,3 +227,27 @@ def test_blender_test_stride_keeps_every_kth_test_frame():
     np.testing.assert_array_equal(sub.images[sub.train_idx], full.images[full.train_idx])
   with pytest.raises(ConfigError, match='Config.test_stride=0'):
     Config(dataset_loader='transforms', test_stride=0, **kw)
+
+
+def test_blender_standard_split_is_the_literatures_eight_ids():
+  """Config.blender_split: 'standard' (the default) trains on DietNeRF's frames 26, 86,
+  2, 55, 75, 93, 16, 73 (images and poses of exactly those train frames) in both
+  loaders; 'linspace' keeps the evenly spaced split; bad values fail in one line."""
+  from renerf_jax.datasets.blender import read_split  # pylint: disable=g-import-not-at-top
+  paths, poses, _ = read_split(str(BLENDER_DIR / 'lego'), 'train')
+  ids = [26, 86, 2, 55, 75, 93, 16, 73]
+  kw = dict(data_dir=str(BLENDER_DIR), scene='lego', n_input_views=8, white_bkgd=True,
+            near=2., far=6., test_stride=8)
+  for loader in ('transforms', 'blender'):
+    std = load_scene(Config(dataset_loader=loader, **kw))
+    np.testing.assert_allclose(std.poses[std.train_idx], poses[ids], atol=1e-6)
+    old = load_scene(Config(dataset_loader=loader, blender_split='linspace', **kw))
+    np.testing.assert_allclose(old.poses[old.train_idx],
+                               poses[np.round(np.linspace(0, 99, 8)).astype(int)], atol=1e-6)
+    np.testing.assert_array_equal(std.images[std.test_idx], old.images[old.test_idx])
+  three = load_scene(Config(dataset_loader='blender', **dict(kw, n_input_views=3)))
+  np.testing.assert_allclose(three.poses[three.train_idx], poses[ids[:3]], atol=1e-6)
+  with pytest.raises(DataError, match="blender_split='standard' has 8 training frames"):
+    load_scene(Config(dataset_loader='blender', **dict(kw, n_input_views=9)))
+  with pytest.raises(ConfigError, match="Config.blender_split='even'"):
+    Config(blender_split='even')

@@ -36,28 +36,45 @@ def read_split(scene_dir, split):
   return paths, np.stack(poses), angle
 
 
+# The few-shot Blender training frames of DietNeRF (Jain et al. 2021), used by RegNeRF,
+# FreeNeRF, FSGS and DNGaussian: indices into transforms_train.json's frames.
+STANDARD_TRAIN_IDS = (26, 86, 2, 55, 75, 93, 16, 73)
+
+
 def blender_split(n_train, n_test, config, source):
   """The few-shot split of a Blender layout (train and test files).
 
   Args:
     n_train, n_test: frames in transforms_train.json and transforms_test.json.
-    config: Config (n_input_views, test_stride).
+    config: Config (n_input_views, blender_split, test_stride).
     source: the file or folder named in the error.
 
   Returns:
-    (the n_input_views training frames, evenly spaced; every test_stride-th test frame),
-    index arrays. Raises DataError when fewer training frames exist than are asked for.
+    (the n_input_views training frames: the first n_input_views of STANDARD_TRAIN_IDS
+    with Config.blender_split='standard', evenly spaced with 'linspace'; every
+    test_stride-th test frame), index arrays. Raises DataError when the frames asked for
+    do not exist.
   """
   if config.n_input_views > n_train:
     raise DataError(f'Config.n_input_views={config.n_input_views} but {source} has '
                     f'{n_train} train frames')
-  pick = np.round(np.linspace(0, n_train - 1, config.n_input_views)).astype(int)
+  if config.blender_split == 'standard':
+    if config.n_input_views > len(STANDARD_TRAIN_IDS):
+      raise DataError(f"Config.blender_split='standard' has {len(STANDARD_TRAIN_IDS)} "
+                      f'training frames, not Config.n_input_views={config.n_input_views} '
+                      "(use 'linspace')")
+    pick = np.asarray(STANDARD_TRAIN_IDS[:config.n_input_views])
+    if pick.max() >= n_train:
+      raise DataError(f"Config.blender_split='standard' needs train frame {pick.max()} but "
+                      f"{source} has {n_train} (use 'linspace')")
+  else:
+    pick = np.round(np.linspace(0, n_train - 1, config.n_input_views)).astype(int)
   return pick, np.arange(0, n_test, config.test_stride)
 
 
 def load_blender(config) -> Scene:
-  """Loads a Blender scene: train views (first n_input_views evenly spread if fewer are
-  asked than exist) and test views, RGBA composited on white when config.white_bkgd."""
+  """Loads a Blender scene: the n_input_views train views of blender_split and the test
+  views, RGBA composited on white when config.white_bkgd."""
   scene_dir = os.path.join(config.data_dir, config.scene)
   if not os.path.isdir(scene_dir):
     raise DataError(f'scene folder not found: {scene_dir}')

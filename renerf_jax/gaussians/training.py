@@ -37,7 +37,7 @@ from renerf_jax.gaussians.loss import image_loss
 from renerf_jax.gaussians.schedule import (densify_schedule, make_optimizer, means_lr,
                                            set_means_lr, sh_degree_at)
 from renerf_jax.progress import progress_bar
-from renerf_jax.training import TrainResult
+from renerf_jax.training import TrainResult, init_and_step_keys
 
 NEAR = 0.2  # Gaussians nearer than this depth are culled (the reference's frustum test).
 TILE = 16
@@ -329,8 +329,7 @@ def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=N
   extent = scene_extent(config, scene)
   extent_arr = jnp.asarray(extent, jnp.float32)
   has_pseudo = pseudo is not None and window[1] > window[0]
-  base_key = jax.random.PRNGKey(config.seed)
-  k_init, base_key = jax.random.split(base_key)
+  k_init, base_key = init_and_step_keys(config)
   params = init_gaussians(config, scene, k_init) if init_params is None else init_params
   state, train_seconds, curve = rundir.resume_training(
       out_dir, init_state(config, params, extent))

@@ -1,0 +1,80 @@
+"""Where a trained NeRF puts the rendering weight of its test views (issue 49's diagnosis).
+
+For each test view of a finished round: the fraction of the rendered weight (sum over
+samples of w_i, i.e. the opacity) that lies (a) outside the grid box (Config.grid_box;
+bounded scenes: the grid clamps such points onto the box faces), (b) within a distance
+`--near_dist` of some training camera centre, (c) inside the box; and the per-view PSNR.
+A run whose test PSNR is low because of floaters shows weight where no surface is.
+
+  python -m experiments.weight_location --run_dir RUN [RUN ...] --out FILE.json
+"""
+import argparse
+import json
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from renerf_jax import renerf, report, resume
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import camera_rays, load_scene
+from renerf_jax.model import render_rays
+
+
+def view_weights(config, params, rays, train_centres, near_dist, chunk=4096):
+  """Per-pixel weight outside the box, near a training camera, and the opacity."""
+  lo, hi = (np.asarray(b, np.float32) for b in config.grid_box)
+  flat = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[3:]), rays)
+  n = flat.origins.shape[0]
+
+  @jax.jit
+  def one(r):
+    fine = render_rays(config, params, r, jax.random.PRNGKey(0), train=False)[-1]
+    t = fine['t_vals']
+    mid = 0.5 * (t[..., 1:] + t[..., :-1])
+    pts = r.origins[:, None] + mid[..., None] * r.directions[:, None]
+    w = fine['weights']
+    outside = jnp.any((pts < lo) | (pts > hi), axis=-1)
+    dist = jnp.min(jnp.linalg.norm(pts[..., None, :] - train_centres, axis=-1), axis=-1)
+    return (jnp.sum(w * outside, -1), jnp.sum(w * (dist < near_dist), -1), jnp.sum(w, -1))
+
+  outs = [one(jax.tree_util.tree_map(lambda x: x[i:i + chunk], flat))
+          for i in range(0, n, chunk)]
+  return [np.concatenate([np.asarray(o[k]) for o in outs]) for k in range(3)]
+
+
+def main(argv=None):
+  p = argparse.ArgumentParser(description=__doc__,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+  p.add_argument('--run_dir', nargs='+', required=True)
+  p.add_argument('--round', type=int, default=0)
+  p.add_argument('--near_dist', type=float, default=1.0)
+  p.add_argument('--out', required=True)
+  p.add_argument('--gin_bindings', action='append', default=[],
+                 help="e.g. Config.blender_split='linspace' for a run made before the field")
+  args = p.parse_args(argv)
+  result = {}
+  for run_dir in args.run_dir:
+    config = load_config([os.path.join(run_dir, 'config.gin')], args.gin_bindings)
+    scene = load_scene(config)
+    cfg = renerf.round_config(config, args.round)
+    rdir = resume.round_dir(run_dir, args.round)
+    state = resume.load_round(config, rdir, renerf.RoundState(
+        params=None, pseudo=None, round_index=args.round - 1))
+    per_image = report.read_json(os.path.join(rdir, 'eval', 'metrics.json'))['per_image']
+    centres = jnp.asarray(scene.poses[scene.train_idx][:, :3, 3])
+    rows = []
+    for i, idx in enumerate(scene.test_idx):
+      rays = camera_rays(scene, [idx])
+      out_w, near_w, acc = view_weights(cfg, state.params, rays, centres, args.near_dist)
+      rows.append({'name': per_image[i]['name'], 'psnr': per_image[i]['psnr'],
+                   'outside_box': float(out_w.mean()), 'near_camera': float(near_w.mean()),
+                   'opacity': float(acc.mean())})
+      print(run_dir, rows[-1], flush=True)
+    result[run_dir] = rows
+  report.write_json(args.out, result)
+
+
+if __name__ == '__main__':
+  main()
