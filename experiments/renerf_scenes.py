@@ -4,7 +4,7 @@ For every scene and seed: the baseline B, Re-Nerfing R1 (D trained from scratch 
 real views plus B's pseudo-views), B trained 2x longer (for R1 also the equal-time
 control; --scenes_2x limits it to some scenes), and the seed-matched controls of issue 49
 (--no_controls skips them): B's training at D's seed (Config.d_seed, renerf.round_config)
-at B's steps ("D's seed, no pseudo-views (K 0)": it differs from R1 in the pseudo-views
+at B's steps ("D's seed, no pseudo-views": it differs from R1 in the pseudo-views
 alone) and at 2x B's steps. Every row is paired with B, with both controls, with B 2x and
 with R1: mean +- std, wins, a paired t-test p-value and a paired bootstrap 95% interval
 (experiments/paired.py); a gain is shown (bold) only when the interval excludes 0 and
@@ -61,7 +61,9 @@ TWO_X = 'B 2x steps'  # the row of B trained 2x longer (the control for more com
 # at B's steps (D without pseudo-views: it differs from R1 in the pseudo-views alone) and
 # at 2x B's steps (more compute at D's seed). With Config.d_seed = 'same' they are B and
 # B 2x themselves (copied bit for bit, nothing trained).
-CONTROL = "D's seed, no pseudo-views (K 0)"
+# (Issue 34's tables made the first as a --variant, "D's seed, no pseudo-views (K 0)": R1
+# at K 0, the same model bit for bit, in a run directory of its own layout.)
+CONTROL = "D's seed, no pseudo-views"
 CONTROL_2X = "D's seed, B 2x steps"
 # Every row is paired with each of these rows of the same (scene, seed): summary key,
 # row label, the short name in the tables.
@@ -297,7 +299,7 @@ def summarize(all_rows, scenes, seeds):
       continue
     # The mean over scenes of each scene's mean delta, and the pooled pairs.
     per_scene = {k: [out['scenes'][sc][label]['paired'][k]['mean'] for sc in scenes
-                     if label in out['scenes'][sc] and k in out['scenes'][sc][label]['paired']]
+                     if k in out['scenes'][sc].get(label, {}).get('paired', {})]
                  for k in METRICS}
     entry = {'mean_of_scene_means': {k: tables.mean_std(v) for k, v in per_scene.items() if v},
              'scenes': sum(label in all_rows[sc] for sc in scenes)}
@@ -363,7 +365,7 @@ def markdown(summary, scenes, command, sources=(), backbone='nerf'):
         fmt_pair(e.get('pooled' + key[len('paired'):], {}), 'psnr')
         for key, _, _ in pooled_refs)
         + f" | {fmt_pair(e['pooled'], 'ssim', 3)} | {fmt_pair(e['pooled'], 'lpips_alex', 3)} |")
-  pad = ' |' * (len(pooled_refs) + 1)
+  pad = ' |' * len(pooled_refs)
   if summary['paper_R1_delta_mean']:
     pm = summary['paper_R1_delta_mean']
     lines.append(f"| paper R1 - RegNeRF (these scenes) | | {pm['psnr']:+.2f} |{pad} "

@@ -1,9 +1,11 @@
 """Where a trained NeRF puts the rendering weight of its test views (issue 49's diagnosis).
 
 For each test view of a finished round: the fraction of the rendered weight (sum over
-samples of w_i, i.e. the opacity) that lies (a) outside the grid box (Config.grid_box;
-bounded scenes: the grid clamps such points onto the box faces), (b) within a distance
-`--near_dist` of some training camera centre, (c) inside the box; and the per-view PSNR.
+samples of w_i) that lies (a) outside Config.grid_box in world space (bounded scenes: the
+grid clamps such points onto the box faces unless Config.outside_box = 'empty'; with
+contraction it is only the far background), (b) within a distance `--near_dist` of some
+training camera centre (world space: not for NDC scenes), and the opacity; with the
+per-view PSNR of the round's evaluation.
 A run whose test PSNR is low because of floaters shows weight where no surface is.
 
   python -m experiments.weight_location --run_dir RUN [RUN ...] --out FILE.json
@@ -29,7 +31,7 @@ def view_weights(config, params, rays, train_centres, near_dist, chunk=4096):
   n = flat.origins.shape[0]
 
   @jax.jit
-  def one(r):
+  def one(params, r):
     fine = render_rays(config, params, r, jax.random.PRNGKey(0), train=False)[-1]
     t = fine['t_vals']
     mid = 0.5 * (t[..., 1:] + t[..., :-1])
@@ -39,7 +41,7 @@ def view_weights(config, params, rays, train_centres, near_dist, chunk=4096):
     dist = jnp.min(jnp.linalg.norm(pts[..., None, :] - train_centres, axis=-1), axis=-1)
     return (jnp.sum(w * outside, -1), jnp.sum(w * (dist < near_dist), -1), jnp.sum(w, -1))
 
-  outs = [one(jax.tree_util.tree_map(lambda x: x[i:i + chunk], flat))
+  outs = [one(params, jax.tree_util.tree_map(lambda x: x[i:i + chunk], flat))
           for i in range(0, n, chunk)]
   return [np.concatenate([np.asarray(o[k]) for o in outs]) for k in range(3)]
 

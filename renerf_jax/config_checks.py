@@ -94,6 +94,12 @@ def check_config(c):
   _check(c.near_camera_loss_mult >= 0. and c.near_camera_radius >= 0.,
          f'Config.near_camera_loss_mult={c.near_camera_loss_mult} and '
          f'near_camera_radius={c.near_camera_radius} must be >= 0')
+  _check(c.near_camera_loss_mult == 0. or c.backbone == 'nerf',
+         f'Config.near_camera_loss_mult={c.near_camera_loss_mult} is a NeRF loss; '
+         f'Config.backbone={c.backbone!r} ignores it')
+  _check(c.outside_box == 'clamp' or not c.contraction,
+         "Config.outside_box='empty' with Config.contraction: every contracted point is "
+         'inside the box already (leave it at clamp)')
   _check(c.near_camera_loss_mult == 0. or not c.use_ndc,
          'Config.near_camera_loss_mult > 0 needs use_ndc = False (camera centres are in '
          'world space)')

@@ -21,6 +21,19 @@ TINY = ['Config.procedural_size = (32, 40)', 'Config.max_steps = 12',
         "Config.interp_factors = '2x'"]
 
 
+def assert_table_cells(md):
+  """Every row of every markdown table has as many cells as its header."""
+  width = None
+  for line in md.splitlines():
+    if not line.startswith('|'):
+      width = None
+      continue
+    cells = line.count('|') - 1
+    if width is None:
+      width = cells
+    assert cells == width, f'{cells} cells, header {width}: {line}'
+
+
 def _run(module, out, *extra):
   cmd = ([sys.executable, '-m', f'experiments.{module}', '--config', 'gin_configs/demo.gin',
           '--out', str(out), '--seeds', '0', '1'] + [f'--gin_bindings={b}' for b in TINY]
@@ -232,6 +245,7 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   md = (out / 's.md').read_text()
   assert 'B 2x steps' in md and 'wins' in md and (out / 's.png').stat().st_size > 0
   assert "dPSNR vs D's seed K 0" in md and 'paired t-test' in md
+  assert_table_cells(md)
   assert f"| B equal time ({eq['max_steps']} steps) |" in md
   # --table: a subset of the same runs (reused, nothing trained) into other files.
   before = tree_files(out / 's')
@@ -373,6 +387,8 @@ def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_ba
   assert s2['mean']['B 2x steps']['pooled_2x'] == {}
   assert '| -0.10 +- 0.57 (1/2), p 0.84, [' in renerf_scenes.markdown(s2, ['fern'], 'cmd')
   gs = renerf_scenes.markdown(summary, ['fern'], 'cmd', backbone='gaussians')
+  assert_table_cells(gs)
+  assert_table_cells(renerf_scenes.markdown(s2, ['fern'], 'cmd'))
   assert '| paper R1 - 3DGS (mip-NeRF 360, 30 views: no LLFF 3DGS rows) | | +0.81 |' in gs
   assert 'paper R1 - 3DGS' not in renerf_scenes.markdown(summary, ['fern'], 'cmd')
   paths = []
@@ -408,3 +424,34 @@ def test_scenes_table_with_d_sharing_b_seed_copies_b_as_its_controls(tmp_path):
   assert params('Re-Nerfing', 1) != params('Re-Nerfing')  # D trained on pseudo-views
   rows = json.loads((out / 'same.json').read_text())['rows']['procedural']
   assert rows[renerf_scenes.CONTROL]['0']['psnr'] == rows['B']['0']['psnr']
+
+
+def test_seed_spread_reports_each_rows_spread_and_the_views_that_spread(tmp_path):
+  """experiments/seed_spread.py on a synthetic table and two synthetic runs."""
+  from experiments import seed_spread  # pylint: disable=g-import-not-at-top
+  from renerf_jax import report  # pylint: disable=g-import-not-at-top
+  m = lambda p: {'psnr': p, 'ssim': 0.5, 'lpips_alex': 0.2}
+  report.write_json(str(tmp_path / 't.json'),
+                    {'rows': {'lego': {'B': {'0': m(20.), '1': m(22.), '2': m(21.)}}}})
+  runs = []
+  for i, psnrs in enumerate(([20., 25.], [20.5, 15.])):
+    d = tmp_path / f'run{i}' / 'round_0' / 'eval'
+    d.mkdir(parents=True)
+    report.write_json(str(d / 'metrics.json'), {'per_image': [
+        {'name': f'test_{j}', 'psnr': p} for j, p in enumerate(psnrs)]})
+    runs.append(str(tmp_path / f'run{i}'))
+  seed_spread.main(['--tables', str(tmp_path / 't.json'), '--runs', 'B=' + ','.join(runs),
+                    '--out', str(tmp_path / 's')])
+  out = json.loads((tmp_path / 's.json').read_text())
+  b = out['tables']['t']['lego']['B']
+  assert b['seeds'] == [0, 1, 2] and b['psnr']['mean'] == pytest.approx(21.)
+  assert b['psnr']['std'] == pytest.approx(1.) and (b['psnr']['min'], b['psnr']['max']) == (20., 22.)
+  views = out['views']['B']
+  assert [v['name'] for v in views] == ['test_1', 'test_0']  # the spread one first
+  assert views[0]['std'] == pytest.approx(np.std([25., 15.], ddof=1))
+  md = (tmp_path / 's.md').read_text()
+  assert '| t | lego | B | 3 | 21.00 +- 1.00 [20.00, 22.00] |' in md
+  assert_table_cells(md)
+  with pytest.raises(SystemExit, match='not LABEL=DIR'):
+    seed_spread.main(['--tables', str(tmp_path / 't.json'), '--runs', 'B', '--out',
+                      str(tmp_path / 'x')])

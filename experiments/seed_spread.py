@@ -1,0 +1,95 @@
+"""The spread over seeds of each row of renerf_scenes tables (issue 49: do runs agree?).
+
+For every table, scene and row: the seeds, mean +- std (ddof 1), min and max of PSNR,
+SSIM and LPIPS-alex; the per-test-view std over seeds of the row's runs when their run
+directories are given (--runs), which tells whether the spread sits in a few views.
+
+  python -m experiments.seed_spread --tables T1.json T2.json --out DIR/spread
+"""
+import argparse
+import os
+
+import numpy as np
+
+from renerf_jax import report
+
+METRICS = (('psnr', 'PSNR', 2), ('ssim', 'SSIM', 3), ('lpips_alex', 'LPIPS-alex', 3))
+
+
+def spread(values):
+  """{'n', 'mean', 'std', 'min', 'max'} of a list of numbers (std 0 for one)."""
+  v = np.asarray(values, np.float64)
+  return {'n': int(v.size), 'mean': float(v.mean()),
+          'std': float(v.std(ddof=1)) if v.size > 1 else 0., 'min': float(v.min()),
+          'max': float(v.max())}
+
+
+def table_spreads(path):
+  """{scene: {row: {metric: spread, 'seeds': [...]}}} of one renerf_scenes table."""
+  table = report.read_json(path)
+  out = {}
+  for scene, rows in table['rows'].items():
+    for label, by_seed in rows.items():
+      entry = {'seeds': sorted(int(s) for s in by_seed)}
+      for k, _, _ in METRICS:
+        vals = [m[k] for m in by_seed.values() if k in m]
+        if vals:
+          entry[k] = spread(vals)
+      out.setdefault(scene, {})[label] = entry
+  return out
+
+
+def view_spread(run_dirs, round_index=0):
+  """Per test view: the std over runs of its PSNR ({'name', 'mean', 'std'}), worst first."""
+  per_run = [report.read_json(os.path.join(d, f'round_{round_index}', 'eval',
+                                           'metrics.json'))['per_image'] for d in run_dirs]
+  names = [m['name'] for m in per_run[0]]
+  rows = []
+  for i, name in enumerate(names):
+    s = spread([run[i]['psnr'] for run in per_run])
+    rows.append({'name': name, 'mean': s['mean'], 'std': s['std']})
+  return sorted(rows, key=lambda r: -r['std'])
+
+
+def main(argv=None):
+  p = argparse.ArgumentParser(description=__doc__,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+  p.add_argument('--tables', nargs='+', required=True, help='renerf_scenes .json tables')
+  p.add_argument('--runs', nargs='*', default=[], metavar='LABEL=DIR,DIR,...',
+                 help='run directories whose per-view PSNR spread to report')
+  p.add_argument('--out', required=True, help='output path without extension')
+  args = p.parse_args(argv)
+  result = {'tables': {}, 'views': {}, 'command': ' '.join(
+      ['python -m experiments.seed_spread'] + (argv if argv is not None else
+                                               __import__('sys').argv[1:]))}
+  lines = ['| table | scene | row | seeds | ' + ' | '.join(
+      f'{name} mean +- std [min, max]' for _, name, _ in METRICS) + ' |',
+           '|---|---|---|---|' + '---|' * len(METRICS)]
+  for path in args.tables:
+    name = os.path.splitext(os.path.basename(path))[0]
+    spreads = table_spreads(path)
+    result['tables'][name] = spreads
+    for scene, rows in spreads.items():
+      for label, e in rows.items():
+        cells = [f"{e[k]['mean']:.{d}f} +- {e[k]['std']:.{d}f} [{e[k]['min']:.{d}f}, "
+                 f"{e[k]['max']:.{d}f}]" if k in e else '' for k, _, d in METRICS]
+        lines.append(f"| {name} | {scene} | {label} | {len(e['seeds'])} | "
+                     + ' | '.join(cells) + ' |')
+  for spec in args.runs:
+    label, sep, dirs = spec.partition('=')
+    if not sep or not dirs:
+      raise SystemExit(f'error: --runs {spec!r} is not LABEL=DIR,DIR,...')
+    views = view_spread(dirs.split(','))
+    result['views'][label] = views
+    lines += ['', f'Per test view, {label} ({len(dirs.split(","))} runs), the 5 views '
+              'whose PSNR spreads most over seeds:', '', '| view | PSNR mean | std |',
+              '|---|---|---|'] + [f"| {v['name']} | {v['mean']:.2f} | {v['std']:.2f} |"
+                                  for v in views[:5]]
+  lines += ['', 'Command:', '', f"    {result['command']}", '']
+  report.write_json(args.out + '.json', result)
+  report.write_markdown(args.out + '.md', '\n'.join(lines))
+  print('\n'.join(lines))
+
+
+if __name__ == '__main__':
+  main()
