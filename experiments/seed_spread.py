@@ -9,8 +9,7 @@ directories are given (--runs), which tells whether the spread sits in a few vie
 import argparse
 import os
 
-import numpy as np
-
+from experiments import tables
 from renerf_jax import report
 
 METRICS = (('psnr', 'PSNR', 2), ('ssim', 'SSIM', 3), ('lpips_alex', 'LPIPS-alex', 3))
@@ -18,10 +17,9 @@ METRICS = (('psnr', 'PSNR', 2), ('ssim', 'SSIM', 3), ('lpips_alex', 'LPIPS-alex'
 
 def spread(values):
   """{'n', 'mean', 'std', 'min', 'max'} of a list of numbers (std 0 for one)."""
-  v = np.asarray(values, np.float64)
-  return {'n': int(v.size), 'mean': float(v.mean()),
-          'std': float(v.std(ddof=1)) if v.size > 1 else 0., 'min': float(v.min()),
-          'max': float(v.max())}
+  mean, std = tables.mean_std(values)
+  return {'n': len(values), 'mean': mean, 'std': std, 'min': float(min(values)),
+          'max': float(max(values))}
 
 
 def table_spreads(path):
@@ -59,9 +57,8 @@ def main(argv=None):
                  help='run directories whose per-view PSNR spread to report')
   p.add_argument('--out', required=True, help='output path without extension')
   args = p.parse_args(argv)
-  result = {'tables': {}, 'views': {}, 'command': ' '.join(
-      ['python -m experiments.seed_spread'] + (argv if argv is not None else
-                                               __import__('sys').argv[1:]))}
+  result = {'tables': {}, 'views': {},
+            'command': tables.command_line('experiments.seed_spread', argv)}
   lines = ['| table | scene | row | seeds | ' + ' | '.join(
       f'{name} mean +- std [min, max]' for _, name, _ in METRICS) + ' |',
            '|---|---|---|---|' + '---|' * len(METRICS)]

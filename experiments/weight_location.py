@@ -11,7 +11,8 @@ A run whose test PSNR is low because of floaters shows weight where no surface i
   python -m experiments.weight_location --run_dir RUN [RUN ...] --out FILE.json
 """
 import argparse
-import json
+import dataclasses
+import functools
 import os
 
 import jax
@@ -21,27 +22,30 @@ import numpy as np
 from renerf_jax import renerf, report, resume
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import camera_rays, load_scene
-from renerf_jax.model import render_rays
+from renerf_jax.model import empty_outside_box, render_rays
+from renerf_jax.regularizers import near_camera_ray_weight
+
+
+@functools.partial(jax.jit, static_argnums=(0, 4))
+def _chunk_weights(config, params, rays, centres, near_dist):
+  """Per ray of one chunk: weight outside the box, near a camera, and the opacity."""
+  fine = render_rays(config, params, rays, jax.random.PRNGKey(0), train=False)[-1]
+  t, w = fine['t_vals'], fine['weights']
+  mid = 0.5 * (t[..., 1:] + t[..., :-1])
+  pts = rays.origins[:, None] + mid[..., None] * rays.directions[:, None]
+  box_only = dataclasses.replace(config, outside_box='empty', contraction='')
+  outside = ~empty_outside_box(box_only, pts,
+                               jnp.ones_like(w)).astype(bool)
+  near = near_camera_ray_weight(rays.origins, rays.directions, t, w, centres, near_dist)
+  return jnp.sum(w * outside, -1), near, jnp.sum(w, -1)
 
 
 def view_weights(config, params, rays, train_centres, near_dist, chunk=4096):
-  """Per-pixel weight outside the box, near a training camera, and the opacity."""
-  lo, hi = (np.asarray(b, np.float32) for b in config.grid_box)
+  """Per pixel of one view: weight outside the box, near a training camera, opacity."""
   flat = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[3:]), rays)
   n = flat.origins.shape[0]
-
-  @jax.jit
-  def one(params, r):
-    fine = render_rays(config, params, r, jax.random.PRNGKey(0), train=False)[-1]
-    t = fine['t_vals']
-    mid = 0.5 * (t[..., 1:] + t[..., :-1])
-    pts = r.origins[:, None] + mid[..., None] * r.directions[:, None]
-    w = fine['weights']
-    outside = jnp.any((pts < lo) | (pts > hi), axis=-1)
-    dist = jnp.min(jnp.linalg.norm(pts[..., None, :] - train_centres, axis=-1), axis=-1)
-    return (jnp.sum(w * outside, -1), jnp.sum(w * (dist < near_dist), -1), jnp.sum(w, -1))
-
-  outs = [one(params, jax.tree_util.tree_map(lambda x: x[i:i + chunk], flat))
+  outs = [_chunk_weights(config, params, jax.tree_util.tree_map(
+      lambda x: x[i:i + chunk], flat), train_centres, float(near_dist))
           for i in range(0, n, chunk)]
   return [np.concatenate([np.asarray(o[k]) for o in outs]) for k in range(3)]
 

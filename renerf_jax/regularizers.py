@@ -108,24 +108,29 @@ def ray_distortion(t_vals, weights, near, far):
   return jnp.mean(distortion_loss(s_vals, weights))
 
 
-def near_camera_weight(origins, directions, t_vals, weights, centres, radius):
-  """Mean over rays of the rendering weight within `radius` of any camera centre.
+def near_camera_ray_weight(origins, directions, t_vals, weights, centres, radius):
+  """Per ray: the rendering weight within `radius` of any camera centre.
 
   The few training cameras of a sparse capture can each explain their own pixels with a
   floater just in front of them; a test camera beside one of them then looks through it
-  (experiments/results/seed_matched_fox_lego: fox's worst test views). The penalty
-  pushes that weight to 0.
+  (experiments/results/seed_matched_fox_lego: fox's worst test views).
 
   Args:
     origins, directions: [B, 3] rays (world space, unnormalised directions as the
       samples use them). t_vals: [B, S+1] interval ends. weights: [B, S].
-    centres: [C, 3] training camera centres. radius: static distance (world units).
+    centres: [C, 3] camera centres. radius: distance (world units).
 
   Returns:
-    Scalar: mean over rays of sum_i w_i [min_c |x_i - c| < radius], x_i the interval
-    midpoints; 0 when no sample is that near (or radius <= 0).
+    [B]: sum_i w_i [min_c |x_i - c| < radius], x_i the interval midpoints.
   """
   mid = 0.5 * (t_vals[..., 1:] + t_vals[..., :-1])
   pts = origins[..., None, :] + mid[..., None] * directions[..., None, :]
   d2 = jnp.min(jnp.sum((pts[..., None, :] - centres)**2, axis=-1), axis=-1)
-  return jnp.mean(jnp.sum(weights * (d2 < radius * radius), axis=-1))
+  return jnp.sum(weights * (d2 < radius * radius), axis=-1)
+
+
+def near_camera_weight(origins, directions, t_vals, weights, centres, radius):
+  """The near-camera density penalty: the mean over rays of near_camera_ray_weight (0
+  when no sample is that near, or radius <= 0); the loss pushes that weight to 0."""
+  return jnp.mean(near_camera_ray_weight(origins, directions, t_vals, weights, centres,
+                                         radius))
