@@ -106,7 +106,7 @@ def stored_rates(out, name, labels, given):
   return stored
 
 
-def mean_std(rows, key):
+def column_mean_std(rows, key):
   """(mean, std, count) of rows[i][key] over the rows that have it (nan, nan, 0 if none)."""
   vals = [r[key] for r in rows if key in r]
   return (*tables.mean_std(vals), len(vals)) if vals else (float('nan'), float('nan'), 0)
@@ -171,7 +171,7 @@ def main():
     summary = {'label': label, 'configs': files, 'sec_per_step': sps, 'max_steps': steps,
                'sec_per_step_given': was_given, 'seeds': seeds, 'runs': runs}
     for k in METRICS + ('round_seconds',):
-      summary[k], summary[k + '_std'], summary[k + '_n'] = mean_std(runs, k)
+      summary[k], summary[k + '_std'], summary[k + '_n'] = column_mean_std(runs, k)
     results['methods'].append(summary)
     report.write_json(os.path.join(args.out, args.name + '.json'), results)
 

@@ -198,8 +198,9 @@ def resolve_factors(
   """Resolves an augmentation spec into interpolation factors.
 
   Args:
-    spec: a key of `AUGMENTATION_PRESETS` (e.g. '3x'), or a number / sequence
-      of numbers, each strictly between 0 and 1.
+    spec: a key of `AUGMENTATION_PRESETS` (e.g. '3x'), a comma-separated string of
+      numbers ('0.25,0.5') or a number / sequence of numbers, each strictly between 0
+      and 1.
 
   Returns:
     Tuple of Python floats.
@@ -208,12 +209,15 @@ def resolve_factors(
     ValueError: for an unknown preset name, an empty sequence or a factor
       outside the open interval (0, 1).
   """
-  if isinstance(spec, str):
-    if spec not in AUGMENTATION_PRESETS:
+  if isinstance(spec, str) and spec not in AUGMENTATION_PRESETS:
+    try:  # '0.25,0.5': the factors themselves.
+      spec = [float(v) for v in spec.split(',') if v.strip()]
+    except ValueError:
       raise ValueError(
           f'unknown augmentation preset {spec!r}; expected one of '
           f'{", ".join(AUGMENTATION_PRESETS)} or a sequence of factors in '
-          f'(0, 1)')
+          f'(0, 1)') from None
+  if isinstance(spec, str):
     return AUGMENTATION_PRESETS[spec]
   values = np.atleast_1d(np.asarray(spec, dtype=np.float64))
   if values.ndim != 1 or values.size == 0:

@@ -27,11 +27,10 @@ class PseudoViews:
 
 
 def parse_factors(spec: str):
-  """'7x' (a preset) or '0.25,0.5' -> tuple of interpolation factors in (0, 1)."""
+  """Config.interp_factors ('7x', a preset, or '0.25,0.5') -> tuple of interpolation
+  factors in (0, 1), parsed once by poses.resolve_factors; a bad spec is a ConfigError."""
   try:
-    if spec in pose_lib.AUGMENTATION_PRESETS:
-      return pose_lib.resolve_factors(spec)
-    return pose_lib.resolve_factors([float(v) for v in spec.split(',') if v.strip()])
+    return pose_lib.resolve_factors(spec)
   except ValueError as e:
     raise ConfigError(f'Config.interp_factors={spec!r}: {e}') from None
 
@@ -124,11 +123,9 @@ def random_target_poses(config, scene):
                       "with Config.pseudo_targets containing 'random'")
   rng = np.random.default_rng([config.seed, 7919])
   train = np.asarray(scene.poses[scene.train_idx], np.float64)
-  if scene.forward_facing:
-    return random_poses.random_poses_forward_facing(train, config.pseudo_n_random, rng,
-                                                    focus_depth=scene.focus_depth,
-                                                    spread=config.random_pose_spread)
-  return random_poses.random_poses_sphere(train, config.pseudo_n_random, rng)
+  return random_poses.random_unobserved_poses(train, config.pseudo_n_random, rng,
+                                              scene.forward_facing, scene.focus_depth,
+                                              config.random_pose_spread)
 
 
 def render_view(config, params, rays):

@@ -168,3 +168,34 @@ def random_poses_sphere(
   dirs = np.stack([horiz * np.cos(azimuth), horiz * np.sin(azimuth), z], -1)
   positions = center + radius * dirs
   return look_at(positions, center, np.array([0.0, 0.0, 1.0]))
+
+
+def random_unobserved_poses(
+    train_c2w: Any,
+    n: int,
+    rng: np.random.Generator,
+    forward_facing: bool,
+    focus_depth: Optional[float] = None,
+    spread: float = 1.0,
+) -> np.ndarray:
+  """n random unobserved poses of a scene, by its kind of capture.
+
+  Forward-facing scenes draw `random_poses_forward_facing` (within and slightly beyond
+  the training cameras, looking at the focus point), 360 scenes `random_poses_sphere`
+  (the training cameras' sphere). The depth-TV poses and the random pseudo-view targets
+  both come from here.
+
+  Args:
+    train_c2w: [m, 3, 4] training camera-to-world matrices.
+    n: number of poses. rng: numpy random Generator.
+    forward_facing: the scene's kind (Scene.forward_facing).
+    focus_depth: forward-facing scenes' focus depth (Scene.focus_depth).
+    spread: forward-facing box spread (Config.random_pose_spread).
+
+  Returns:
+    [n, 3, 4] float64 camera-to-world matrices.
+  """
+  if forward_facing:
+    return random_poses_forward_facing(train_c2w, n, rng, focus_depth=focus_depth,
+                                       spread=spread)
+  return random_poses_sphere(train_c2w, n, rng)

@@ -64,12 +64,9 @@ def regularizer_poses(config, scene):
     return None
   rng = np.random.default_rng(config.seed)
   train = np.asarray(scene.poses[scene.train_idx], np.float64)
-  if scene.forward_facing:
-    poses = random_poses.random_poses_forward_facing(train, config.n_random_poses, rng,
-                                                     focus_depth=scene.focus_depth,
-                                                     spread=config.random_pose_spread)
-  else:
-    poses = random_poses.random_poses_sphere(train, config.n_random_poses, rng)
+  poses = random_poses.random_unobserved_poses(train, config.n_random_poses, rng,
+                                               scene.forward_facing, scene.focus_depth,
+                                               config.random_pose_spread)
   return jnp.asarray(poses, jnp.float32)
 
 

@@ -151,6 +151,11 @@ def test_resolve_factors_sequences():
   assert poses.resolve_factors([0.25, 0.75]) == (0.25, 0.75)
   assert poses.resolve_factors(np.array([0.5])) == (0.5,)
   assert poses.resolve_factors((0.1,)) == (0.1,)
+  # A comma-separated string (Config.interp_factors) is parsed here, once.
+  assert poses.resolve_factors('0.25,0.5') == (0.25, 0.5)
+  assert poses.resolve_factors(' 0.5 ') == (0.5,)
+  with pytest.raises(ValueError, match='outside the open interval'):
+    poses.resolve_factors('0.5,2')
 
 
 @pytest.mark.parametrize('bad', [0.0, 1.0, 1.5, -0.2])

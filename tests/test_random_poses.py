@@ -155,3 +155,20 @@ def test_random_poses_sphere_default_center_and_poles():
   np.testing.assert_allclose(-out[:, :, 2], -rel / 2.0, atol=1e-12)
   # Full elevation range [-90, 90] degrees is used.
   assert rel[:, 2].min() < 0.0 < rel[:, 2].max()
+
+
+def test_random_unobserved_poses_picks_the_generator_of_the_scene_kind():
+  """Forward-facing scenes draw the box poses, 360 scenes the sphere's, bit for bit."""
+  rng = np.random.default_rng(0)
+  c2w = random_poses.random_poses_sphere(np.eye(4)[None, :3] + np.array(
+      [[[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 2.]]]), 4, rng)
+  for forward_facing, direct in (
+      (True, lambda r: random_poses.random_poses_forward_facing(c2w, 5, r, focus_depth=3.,
+                                                                spread=1.5)),
+      (False, lambda r: random_poses.random_poses_sphere(c2w, 5, r))):
+    got = random_poses.random_unobserved_poses(c2w, 5, np.random.default_rng(7),
+                                               forward_facing, 3., 1.5)
+    np.testing.assert_array_equal(got, direct(np.random.default_rng(7)))
+  draw = lambda ff: random_poses.random_unobserved_poses(c2w, 5, np.random.default_rng(7),
+                                                         ff, 3., 1.5)
+  assert not np.allclose(draw(True), draw(False))
