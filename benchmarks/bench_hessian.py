@@ -1,4 +1,4 @@
-"""Throughput of the Laplace Hessian pass (renerf_jax.laplace.hessian_diagonal), today's
+"""Throughput of the Laplace Hessian pass (renerf_jax.uncertainty.laplace.hessian_diagonal), today's
 pass against the previous one, side by side in one process.
 
 The previous pass (stop 25, kept below as `previous_hessian_diagonal`) moved all 9
@@ -30,11 +30,12 @@ import numpy as np
 
 from benchmarks.bench_throughput import time_calls
 from experiments.tables import command_line
-from renerf_jax import laplace, model, report
+from renerf_jax import model, report
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
-from renerf_jax.deformation import grid_size, trilinear_corners
 from renerf_jax.fields import init_field_params
+from renerf_jax.uncertainty import laplace
+from renerf_jax.uncertainty.deformation import grid_size, trilinear_corners
 
 
 def previous_per_ray_vertex_jtj(sens, means, lo, hi, n: int):

@@ -24,10 +24,11 @@ import shutil
 import jax
 import numpy as np
 
-from renerf_jax import laplace, pseudo_views, renerf, report, rundir
+from renerf_jax import pseudo_views, renerf, report, rundir
 from renerf_jax.backbones import get_backbone
 from renerf_jax.configs import config_differences, fields_where
 from renerf_jax.resume import round_dir
+from renerf_jax.uncertainty import laplace
 
 
 # --------------------------------------------------------------- memo keys and caches
@@ -136,7 +137,7 @@ class ViewCache:
 class HessianCache:
   """Per-vertex sigma of the Hessian pass of the last HESSIAN_CACHE_SIZE baselines.
 
-  Called as uncertainty.compute_masks' sigma_fn; `hits` and `misses` count the calls.
+  Called as uncertainty.masks.compute_masks' sigma_fn; `hits` and `misses` count the calls.
   """
 
   def __init__(self, max_items=HESSIAN_CACHE_SIZE):

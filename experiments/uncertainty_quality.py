@@ -3,9 +3,9 @@
 For every scene and seed it trains B (round 0 of a run directory <out>/<name>/<scene>/
 seed<k>, resumable, reused when finished), runs both Hessian passes (config.hessian_rays
 subsampled training rays, and all training rays), renders every variant of
-renerf_jax.uncertainty_signals along the test views (one render) and one pseudo-view
+renerf_jax.uncertainty.signals along the test views (one render) and one pseudo-view
 (--panel_view), and measures each U against B's per-pixel error on the test views
-(renerf_jax.uncertainty_quality): RGB squared error everywhere, and on the embedded
+(renerf_jax.uncertainty.quality): RGB squared error everywhere, and on the embedded
 procedural scene also the absolute z-depth error (its true depths are exact; the NDC
 'distance' is converted to z-depth first). The signals of a run are kept in
 <out>/<name>/<scene>/seed<k>_signals.npz and its measures in seed<k>_quality.json
@@ -32,13 +32,13 @@ import numpy as np
 
 from experiments.tables import command_line, mean_std
 from renerf_jax import cli, contraction, jit_cache, report, resume, rundir
-from renerf_jax import uncertainty_quality as uq
-from renerf_jax import uncertainty_signals as us
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import camera_rays, load_scene, ray_pool
 from renerf_jax.progress import progress_bar
 from renerf_jax.pseudo_views import pseudo_view_poses, side_by_side, uncertainty_heatmap
-from renerf_jax.uncertainty import threshold_for_keep_fraction
+from renerf_jax.uncertainty import quality as uq
+from renerf_jax.uncertainty import signals as us
+from renerf_jax.uncertainty.masks import threshold_for_keep_fraction
 
 # The embedded scene at the table config's image size (126 x 94), rendered directly.
 PROCEDURAL = ["Config.dataset_loader = 'procedural'", 'Config.procedural_size = (94, 126)',
@@ -192,7 +192,7 @@ def summarize(runs):
 def markdown(name, rows, means, best, targets, keep_frac, invocations):
   f = lambda r, k, d=3: (f"{r[k]:.{d}f} +- {r[k + '_std']:.{d}f}" if k in r else '')
   lines = [f'# {name}', '', 'Uncertainty U of the baseline B against its per-pixel error on '
-           'the test views (renerf_jax.uncertainty_quality). AUSE: area between the '
+           'the test views (renerf_jax.uncertainty.quality). AUSE: area between the '
            'sparsification curve and the oracle (lower is better); AURG: area between '
            'random and the curve (> 0 better than random); curves normalised by the mean '
            f'error of all pixels, removed fraction 0..0.99. Lift: mean error of the masked '

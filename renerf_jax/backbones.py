@@ -119,7 +119,7 @@ def synthesize_by_rendering(render_views: Callable, config, scene, params,
   Returns:
     (PseudoViews, timing, meta) as renerf.synthesize.
   """
-  from renerf_jax import uncertainty  # pylint: disable=g-import-not-at-top
+  from renerf_jax.uncertainty import masks as uncertainty_masks  # pylint: disable=g-import-not-at-top
   if config.pseudo_source == 'photo':
     return pseudo_views.photo_pseudo_views(config, scene)
   if config.use_masks and config.mask_signal != 'one_minus_acc':
@@ -134,9 +134,8 @@ def synthesize_by_rendering(render_views: Callable, config, scene, params,
   timing = {'render_seconds': time.perf_counter() - t0}
   if config.use_masks:
     u = 1. - np.asarray(out['acc'], np.float32)
-    mu = (float(config.mask_threshold) if config.mask_threshold >= 0 else
-          float(uncertainty.threshold_for_keep_fraction(u, config.mask_keep_frac)))
-    masks = np.asarray(uncertainty.masks_from_uncertainty(u, mu), np.float32)
+    mu = uncertainty_masks.mask_threshold(config, u)
+    masks = np.asarray(uncertainty_masks.masks_from_uncertainty(u, mu), np.float32)
     timing.update(mu=mu, kept_fraction=float(np.mean(masks)))
   else:
     u, masks = np.zeros(shape, np.float32), np.ones(shape, np.float32)

@@ -262,7 +262,7 @@ class Config:
   mask_signal: str = _f('one_minus_acc', 'masks')
   # The uncertainty the masks threshold: a Hessian-free signal of one render,
   # 'one_minus_acc' (the default: the lowest mean AUSE over six scenes),
-  # 'depth_variance', 'weight_entropy' (renerf_jax/uncertainty_signals.py), or 'laplace'
+  # 'depth_variance', 'weight_entropy' (renerf_jax/uncertainty/signals.py), or 'laplace'
   # (the Bayes'-Rays-style Hessian pass below).
   # experiments/results/uncertainty_quality_llff/uq_tiny.md compares them.
   deform_log2_res: int = _f(8, 'hessian')

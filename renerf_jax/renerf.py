@@ -100,8 +100,8 @@ def synthesize(config, scene, params, show_progress=False, sigma_fn=None, render
   Args:
     config, scene: Config and Scene. params: model B.
     show_progress: draw progress bars.
-    sigma_fn: the Hessian pass (uncertainty.compute_masks' sigma_fn; None:
-      laplace.vertex_sigma_pass).
+    sigma_fn: the Hessian pass (uncertainty.masks.compute_masks' sigma_fn; None:
+      uncertainty.laplace.vertex_sigma_pass).
     render_fn: renders one unmasked view (pseudo_views.render_pseudo_views' render_fn;
       None: pseudo_views.render_view).
 
@@ -134,7 +134,7 @@ def masked_pseudo_views(config, scene, params, poses, show_progress=False, sigma
     of all but the Hessian pass, 'hessian_seconds': the pass's as sigma_fn reports
     them, 'mu', 'kept_fraction'}).
   """
-  from renerf_jax import uncertainty  # pylint: disable=g-import-not-at-top
+  from renerf_jax.uncertainty import masks as uncertainty_masks  # pylint: disable=g-import-not-at-top
   t0 = time.perf_counter()
   # The deformation grid spans the space the fields see: the contracted cube with
   # Config.contraction (as Bayes' Rays does on unbounded scenes), else the scene box.
@@ -142,9 +142,9 @@ def masked_pseudo_views(config, scene, params, poses, show_progress=False, sigma
   rays = camera_rays(scene, None, poses)
   train_rays = ray_pool(scene, scene.train_idx)['rays']
   t_masks = time.perf_counter()
-  res = uncertainty.compute_masks(config, params, train_rays, rays, np.asarray(lo),
-                                  np.asarray(hi), show_progress=show_progress,
-                                  sigma_fn=sigma_fn)
+  res = uncertainty_masks.compute_masks(config, params, train_rays, rays, np.asarray(lo),
+                                        np.asarray(hi), show_progress=show_progress,
+                                        sigma_fn=sigma_fn)
   masks_wall = time.perf_counter() - t_masks
   pv = PseudoViews(images=np.clip(res.rgb, 0., 1.), poses=np.asarray(poses),
                    masks=np.asarray(res.mask, np.float32),

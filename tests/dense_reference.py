@@ -1,6 +1,6 @@
 """Dense reference of the Laplace diagonal (small grids and few rays only).
 
-The reference for renerf_jax.laplace.hessian_diagonal. It differentiates the whole
+The reference for renerf_jax.uncertainty.laplace.hessian_diagonal. It differentiates the whole
 renderer w.r.t. the flattened deformation grid theta [V * 3] in forward mode only:
 
 * the Gauss-Newton objective g(theta) = 1/R sum ||rgb(theta) - rgb(0)||^2 has, at theta =
@@ -21,8 +21,8 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from renerf_jax.deformation import grid_size, make_warp
 from renerf_jax.model import colour_levels, render_rays
+from renerf_jax.uncertainty.deformation import grid_size, make_warp
 
 
 def gn_hessian_diagonal(fn, theta0):

@@ -130,14 +130,15 @@ def test_laplace_deformation_grid_spans_the_space_the_fields_see(monkeypatch):
   """With Config.contraction the Bayes' Rays deformation grid covers the contracted
   cube (where the offsets act), else the scene's box."""
   from conftest import tiny_config  # pylint: disable=g-import-not-at-top
-  from renerf_jax import renerf, uncertainty  # pylint: disable=g-import-not-at-top
+  from renerf_jax import renerf  # pylint: disable=g-import-not-at-top
+  from renerf_jax.uncertainty import masks as uncertainty_masks  # pylint: disable=g-import-not-at-top
   from renerf_jax.datasets import load_scene  # pylint: disable=g-import-not-at-top
   seen = []
 
   def fake_masks(config, params, train_rays, rays, lo, hi, **kw):
     seen.append((tuple(np.asarray(lo).tolist()), tuple(np.asarray(hi).tolist())))
     raise StopIteration
-  monkeypatch.setattr(uncertainty, 'compute_masks', fake_masks)
+  monkeypatch.setattr(uncertainty_masks, 'compute_masks', fake_masks)
   for kind in ('l2', ''):
     cfg = tiny_config(use_ndc=False, contraction=kind)
     scene = load_scene(cfg)

@@ -1,4 +1,4 @@
-"""Tests for renerf_jax.deformation (the trilinear deformation grid)."""
+"""Tests for renerf_jax.uncertainty.deformation (the trilinear deformation grid)."""
 
 import jax
 import jax.numpy as jnp
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from tiny_scene import take, tiny_setup
 
-from renerf_jax import deformation
 from renerf_jax.model import render_rays
+from renerf_jax.uncertainty import deformation
 
 
 @pytest.fixture(scope='module')

@@ -1,4 +1,4 @@
-"""Tests for renerf_jax.laplace (the Laplace / Gauss-Newton Hessian diagonal)."""
+"""Tests for renerf_jax.uncertainty.laplace (the Laplace / Gauss-Newton Hessian diagonal)."""
 
 import dataclasses
 
@@ -10,9 +10,10 @@ from dense_reference import (gn_hessian_diagonal, reference_hessian_diagonals,
                              true_hessian_diagonal)
 from tiny_scene import LAM, take, tiny_setup
 
-from renerf_jax import laplace, uncertainty
-from renerf_jax.deformation import trilinear_corners
 from renerf_jax.model import render_rays
+from renerf_jax.uncertainty import laplace
+from renerf_jax.uncertainty import masks as uncertainty_masks
+from renerf_jax.uncertainty.deformation import trilinear_corners
 
 
 @pytest.fixture(scope='module')
@@ -160,8 +161,8 @@ def test_zero_sensitivity_gives_the_prior_without_nan(setup):
   assert np.all(np.isfinite(h))
   np.testing.assert_array_equal(h, np.float32(2. * LAM))
   sigma = laplace.vertex_sigma(jnp.asarray(h))
-  u, rgb = uncertainty.render_uncertainty(config, flat, sigma, rays, -1., 1., chunk=4,
-                                          u_bg=laplace.prior_sigma(LAM))
+  u, rgb = uncertainty_masks.render_uncertainty(config, flat, sigma, rays, -1., 1., chunk=4,
+                                                u_bg=laplace.prior_sigma(LAM))
   assert u.shape == (5,) and rgb.shape == (5, 3)
   assert np.all(np.isfinite(u))
   np.testing.assert_allclose(u, laplace.prior_sigma(LAM), rtol=1e-5)

@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 from dense_reference import reference_hessian_diagonals
 
-from renerf_jax import cameras, laplace, model, training
+from renerf_jax import cameras, model, training
 from renerf_jax.configs import Config
 from renerf_jax.datasets import load_scene
 from renerf_jax.datasets.scene import ray_pool
 from renerf_jax.errors import ConfigError
 from renerf_jax.fields import init_field_params
 from renerf_jax.fields.proposal import interlevel_loss, outer_weights
+from renerf_jax.uncertainty import laplace
 
 
 def _brute_outer(t, t_env, w_env):

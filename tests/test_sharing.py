@@ -180,7 +180,8 @@ def test_finished_rounds_of_a_run_with_the_same_config_are_copied_not_retrained(
 
 
 def test_hessian_pass_is_shared_only_when_nothing_it_depends_on_differs(monkeypatch):
-  from renerf_jax import laplace, uncertainty as unc  # pylint: disable=g-import-not-at-top
+  from renerf_jax.uncertainty import laplace  # pylint: disable=g-import-not-at-top
+  from renerf_jax.uncertainty import masks as unc  # pylint: disable=g-import-not-at-top
   from tiny_scene import LAM, take, tiny_setup  # pylint: disable=g-import-not-at-top
   config, params, pool = tiny_setup()
   config = dataclasses.replace(config, deform_log2_res=1, hessian_rays=24,

@@ -1,4 +1,4 @@
-"""Tests for renerf_jax.uncertainty (rendered uncertainty, thresholds, masks)."""
+"""Tests for renerf_jax.uncertainty.masks (rendered uncertainty, thresholds, masks)."""
 
 import dataclasses
 
@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from tiny_scene import LAM, take, tiny_setup
 
-from renerf_jax import laplace
-from renerf_jax import uncertainty as unc
+from renerf_jax.configs import Config
 from renerf_jax.rendering import render_flat
+from renerf_jax.uncertainty import laplace
+from renerf_jax.uncertainty import masks as unc
 
 
 @pytest.fixture(scope='module')
@@ -47,6 +48,19 @@ def test_extreme_thresholds():
   assert np.isfinite(mu0) and np.isfinite(mu1)
   assert np.all(np.asarray(unc.masks_from_uncertainty(u, mu0)) == 0.)
   assert np.all(np.asarray(unc.masks_from_uncertainty(u, mu1)) == 1.)
+
+
+def test_mask_threshold_is_the_absolute_mu_or_the_keep_fraction_one():
+  """The one rule of compute_masks and backbones.synthesize_by_rendering."""
+  u = np.random.default_rng(7).lognormal(size=(2, 9, 11)).astype(np.float32)
+  absolute = Config(mask_threshold=0.7, mask_keep_frac=0.3)
+  assert unc.mask_threshold(absolute, u) == 0.7
+  assert isinstance(unc.mask_threshold(absolute, u), float)
+  for keep_frac in (0., 0.3, 1.):
+    cfg = Config(mask_threshold=-1., mask_keep_frac=keep_frac)
+    mu = unc.mask_threshold(cfg, u)
+    assert isinstance(mu, float)
+    assert mu == unc.threshold_for_keep_fraction(u, keep_frac)
 
 
 def test_compute_masks_end_to_end(setup):

@@ -1,4 +1,4 @@
-"""Tests for renerf_jax.uncertainty_quality and experiments/uncertainty_quality.py."""
+"""Tests for renerf_jax.uncertainty.quality and experiments/uncertainty_quality.py."""
 import json
 import subprocess
 import sys
@@ -8,7 +8,7 @@ import pytest
 
 from conftest import REPO
 from renerf_jax import cameras
-from renerf_jax import uncertainty_quality as uq
+from renerf_jax.uncertainty import quality as uq
 
 
 def _err(n, seed=0):

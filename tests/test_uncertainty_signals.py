@@ -1,4 +1,4 @@
-"""Tests for renerf_jax.uncertainty_signals."""
+"""Tests for renerf_jax.uncertainty.signals."""
 import dataclasses
 
 import jax.numpy as jnp
@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from tiny_scene import LAM, take, tiny_setup
 
-from renerf_jax import laplace
-from renerf_jax import uncertainty as unc
-from renerf_jax import uncertainty_signals as us
-from renerf_jax.deformation import grid_size, trilinear
+from renerf_jax.uncertainty import laplace
+from renerf_jax.uncertainty import masks as unc
+from renerf_jax.uncertainty import signals as us
+from renerf_jax.uncertainty.deformation import grid_size, trilinear
 
 
 @pytest.fixture(scope='module')

@@ -39,12 +39,13 @@ sys.path.insert(0, os.path.join(REPO, 'tests'))
 import dense_reference
 from test_proposal import COVER
 
-from renerf_jax import laplace, renerf, training
+from renerf_jax import renerf, training
 from renerf_jax.configs import Config, load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.datasets.scene import ray_pool
-from renerf_jax.deformation import grid_size
 from renerf_jax.fields import init_field_params
+from renerf_jax.uncertainty import laplace
+from renerf_jax.uncertainty.deformation import grid_size
 
 STEPS = 800
 

@@ -1,12 +1,12 @@
 """Laplace diagonal of a trained NeRF w.r.t. a deformation grid, in the style of Bayes' Rays.
 
-A zero-initialised deformation field theta on the vertex grid of renerf_jax.deformation
+A zero-initialised deformation field theta on the vertex grid of uncertainty.deformation
 perturbs the sample positions of the trained model: x -> x + trilinear(theta, x). A
 Laplace approximation of the posterior over theta (Gauss-Newton Hessian of the mean
 squared photometric error, plus an isotropic Gaussian prior of precision lambda) gives a
-per-vertex variance (renerf_jax.uncertainty renders it into per-pixel uncertainty).
+per-vertex variance (uncertainty.masks renders it into per-pixel uncertainty).
 
-Conventions (the vertex grid and clamping are renerf_jax.deformation's):
+Conventions (the vertex grid and clamping are uncertainty.deformation's):
   * Hessian: diag(H) = 2 / R sum_r sum_levels diag(J_r^T J_r) + 2 lambda, J_r the Jacobian
     of ray r's rendered rgb [3] of one level w.r.t. theta at theta = 0. Coarse and fine
     levels count separately (their J^T J are added); the fine sample positions are held
@@ -27,9 +27,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from renerf_jax import distributed, mip
-from renerf_jax.deformation import grid_size, trilinear_corners
 from renerf_jax.model import colour_levels, render_rays
 from renerf_jax.progress import progress_bar
+from renerf_jax.uncertainty.deformation import grid_size, trilinear_corners
 
 
 # --------------------------------------------------------------- compensated sums
@@ -312,7 +312,7 @@ def vertex_sigma_pass(config, params, train_rays, lo, hi, chunk, show_progress=F
   """The Hessian pass: per-vertex sigma of the trained model, timed.
 
   Uses config.deform_log2_res and config.hessian_lambda. Not memoised (a caller that runs
-  the same pass several times can wrap it; see uncertainty.compute_masks' sigma_fn).
+  the same pass several times can wrap it; see masks.compute_masks' sigma_fn).
 
   Args:
     config: Config. params: trained field parameters.

@@ -1,7 +1,7 @@
 """Rendered Laplace uncertainty of a trained NeRF and the pseudo-view masks of Re-Nerfing.
 
 The per-vertex sigma of the Laplace approximation over a deformation grid
-(renerf_jax.laplace, on the vertex grid of renerf_jax.deformation), interpolated in space
+(uncertainty.laplace, on the vertex grid of uncertainty.deformation), interpolated in space
 and volume-rendered along pseudo-view rays, is the per-pixel uncertainty U that
 Re-Nerfing thresholds to mask unreliable pseudo-view pixels.
 
@@ -9,6 +9,9 @@ Conventions:
   * Rendered uncertainty: U = sum_i w_i U(x_i) + (1 - acc) U_bg with the fine level's
     weights, U(x) = trilinear(sigma, x), and U_bg = the prior sigma by default (the part
     of a ray that hits nothing is as uncertain as unseen space).
+  * Threshold: mu = Config.mask_threshold when >= 0, else the mu that keeps
+    Config.mask_keep_frac of the pixels (mask_threshold, the one rule every backbone's
+    masks use).
   * Masks: 1 keeps a pixel (U <= mu), 0 masks it (U > mu).
 """
 import functools
@@ -20,12 +23,13 @@ import jax.numpy as jnp
 import jaxopt
 import numpy as np
 
-from renerf_jax import distributed, laplace, mip
-from renerf_jax import uncertainty_signals as sig
-from renerf_jax.deformation import trilinear
+from renerf_jax import distributed, mip
 from renerf_jax.model import materialize, render_rays
 from renerf_jax.progress import progress_bar
 from renerf_jax.rendering import render_flat
+from renerf_jax.uncertainty import laplace
+from renerf_jax.uncertainty import signals as sig
+from renerf_jax.uncertainty.deformation import trilinear
 
 
 # --------------------------------------------------------------- uncertainty
@@ -154,6 +158,22 @@ def threshold_for_keep_fraction(u, keep_frac: float):
   return float(_bisect_threshold(u, jnp.int32(k)))
 
 
+def mask_threshold(config, u) -> float:
+  """The threshold mu of the pseudo-view masks, the one rule of every backbone.
+
+  Args:
+    config: Config. config.mask_threshold >= 0 is an absolute mu on U; else mu keeps
+      config.mask_keep_frac of the pixels (threshold_for_keep_fraction).
+    u: [...] uncertainties of all the pseudo-view pixels (flattened).
+
+  Returns:
+    float mu.
+  """
+  if config.mask_threshold >= 0:
+    return float(config.mask_threshold)
+  return threshold_for_keep_fraction(u, config.mask_keep_frac)
+
+
 def masks_from_uncertainty(u, mu):
   """Float masks: 1 keeps a pixel (U <= mu), 0 masks it (U > mu).
 
@@ -255,10 +275,7 @@ def compute_masks(config, params, train_rays, pseudo_rays, lo, hi,
                                 chunk=config.render_chunk,
                                 u_bg=laplace.prior_sigma(config.hessian_lambda),
                                 show_progress=show_progress, desc=desc)
-  if config.mask_threshold >= 0:
-    mu = float(config.mask_threshold)
-  else:
-    mu = threshold_for_keep_fraction(u, config.mask_keep_frac)
+  mu = mask_threshold(config, u)
   mask = np.asarray(masks_from_uncertainty(u, mu))
   return Masks(uncertainty=u.reshape(shape), mask=mask.reshape(shape), mu=float(mu),
                rgb=rgb.reshape(shape + (3,)), hessian_seconds=float(hessian_seconds),

@@ -3,7 +3,7 @@
 A deformation field theta (3D offsets on a dense (n + 1)^3 vertex grid, n = 2^L, over an
 axis-aligned box [lo, hi]) moves the sample positions of a trained model:
 x -> x + trilinear(theta, x). The same interpolation spreads per-vertex uncertainties
-over space (renerf_jax.uncertainty).
+over space (uncertainty.masks, uncertainty.signals).
 
 Conventions:
   * Vertex grid: `values` tables are [(n + 1)^3, C], flattened x-major: vertex (i, j, k)

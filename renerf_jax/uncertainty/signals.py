@@ -1,7 +1,7 @@
 """Per-pixel uncertainty signals of a trained NeRF B, all from one render along the rays.
 
-The variants that renerf_jax.uncertainty_quality compares (VARIANTS):
-  * laplace: what uncertainty.compute_masks renders with Config.mask_signal='laplace':
+The variants that uncertainty.quality compares (VARIANTS):
+  * laplace: what masks.compute_masks renders with Config.mask_signal='laplace':
     per-vertex sigma (laplace.vertex_sigma) of the Hessian over config.hessian_rays
     training rays drawn with config.seed, U = sum_i w_i trilinear(sigma, x_i) + (1 - acc) prior_sigma(lambda).
   * laplace_all_rays: the same with the Hessian over all training rays.
@@ -34,10 +34,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import laplace, mip
-from renerf_jax.deformation import cells_of, trilinear, trilinear_corners
+from renerf_jax import mip
 from renerf_jax.model import materialize, render_rays
 from renerf_jax.rendering import render_flat
+from renerf_jax.uncertainty import laplace
+from renerf_jax.uncertainty.deformation import cells_of, trilinear, trilinear_corners
 
 VARIANTS = ('laplace', 'laplace_all_rays', 'bayes_rays', 'bayes_rays_subsample',
             'weight_entropy', 'depth_variance', 'one_minus_acc')
@@ -111,7 +112,7 @@ def one_minus_acc(acc):
 
 
 def render_vertex_values(weights, acc, point_values, u_bg):
-  """U = sum_i w_i u_i + (1 - acc) u_bg (uncertainty.render_uncertainty's rendering).
+  """U = sum_i w_i u_i + (1 - acc) u_bg (masks.render_uncertainty's rendering).
 
   Args:
     weights: [..., S]. acc: [...]. point_values: [..., S] U at the samples.
