@@ -46,7 +46,7 @@ def summarise(run_dir):
 def photo_and_render(run_dir, data_dir):
   """[H, 2W, 3] photo | render of the first test view."""
   config = load_config([os.path.join(run_dir, 'config.gin')],
-                       [f"Config.data_dir = '{data_dir}'"])
+                       [f"Config.data_dir = '{data_dir}'"], reset_ignored=True)
   scene = load_scene(config)
   view = int(scene.test_idx[0])
   png = os.path.join(resume.round_dir(run_dir, 0), 'eval', f'test_{view:03d}.png')

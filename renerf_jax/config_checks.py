@@ -5,6 +5,7 @@ work starts; a few fields are also normalised here (lists from gin become tuples
 """
 import math
 
+from renerf_jax.config_fields import BACKBONE_NAMES, field_backbone, ignored_settings
 from renerf_jax.errors import ConfigError
 
 
@@ -16,6 +17,19 @@ def _check(cond: bool, msg: str):
 def pseudo_steps(config) -> int:
   """K in steps: round(Config.pseudo_until_frac * Config.max_steps)."""
   return int(round(config.pseudo_until_frac * config.max_steps))
+
+
+def check_backbone_fields(c):
+  """Raises ConfigError for the first field that Config c's backbone ignores set away
+  from its default (a setting that would silently change nothing).
+
+  Args:
+    c: a Config with a valid backbone.
+  """
+  for name, value in ignored_settings(c):
+    owner = BACKBONE_NAMES[field_backbone(type(c), name)]
+    raise ConfigError(f'Config.{name}={value!r} is a {owner} setting; '
+                      f'Config.backbone={c.backbone!r} ignores it')
 
 
 def check_config(c):
@@ -32,6 +46,9 @@ def check_config(c):
          'pairs')
   object.__setattr__(c, 'llff_min_near', tuple(
       (name, float(near)) for name, near in c.llff_min_near if name == c.scene))
+  _check(c.backbone in ('nerf', 'gaussians'),
+         f'Config.backbone={c.backbone!r} (nerf or gaussians)')
+  check_backbone_fields(c)
   _check(c.dataset_loader in ('llff', 'transforms', 'blender', 'procedural'),
          f'Config.dataset_loader={c.dataset_loader!r} (llff, transforms, blender or '
          'procedural)')
@@ -55,8 +72,6 @@ def check_config(c):
          f'Config.ray_shape={c.ray_shape!r} (cone or cylinder)')
   _check(c.density_activation in ('softplus', 'exp'),
          f'Config.density_activation={c.density_activation!r} (softplus or exp)')
-  _check(c.backbone in ('nerf', 'gaussians'),
-         f'Config.backbone={c.backbone!r} (nerf or gaussians)')
   _check(c.gs_init_points >= 1 and c.gs_capacity >= c.gs_init_points,
          f'Config.gs_capacity={c.gs_capacity} must be >= Config.gs_init_points='
          f'{c.gs_init_points} >= 1')
@@ -94,9 +109,6 @@ def check_config(c):
   _check(c.near_camera_loss_mult >= 0. and c.near_camera_radius >= 0.,
          f'Config.near_camera_loss_mult={c.near_camera_loss_mult} and '
          f'near_camera_radius={c.near_camera_radius} must be >= 0')
-  _check(c.near_camera_loss_mult == 0. or c.backbone == 'nerf',
-         f'Config.near_camera_loss_mult={c.near_camera_loss_mult} is a NeRF loss; '
-         f'Config.backbone={c.backbone!r} ignores it')
   _check(c.outside_box == 'clamp' or not c.contraction,
          "Config.outside_box='empty' with Config.contraction: every contracted point is "
          'inside the box already (leave it at clamp)')
@@ -128,8 +140,9 @@ def check_config(c):
   _check(0. <= c.lr_decay_start_frac < 1.,
          f'Config.lr_decay_start_frac={c.lr_decay_start_frac} must lie in [0, 1)')
   k = pseudo_steps(c)
-  _check(c.num_rounds == 0 or c.pseudo_schedule != 'early' or not c.anneal_nearfar
-         or k >= min(c.anneal_nearfar_steps, c.max_steps),
+  # The NeRF's near/far annealing (the Gaussians have none).
+  _check(c.backbone != 'nerf' or c.num_rounds == 0 or c.pseudo_schedule != 'early'
+         or not c.anneal_nearfar or k >= min(c.anneal_nearfar_steps, c.max_steps),
          f'Config.pseudo_until_frac={c.pseudo_until_frac} puts K at step {k} of '
          f'{c.max_steps}, before the near/far annealing ends (step '
          f'{c.anneal_nearfar_steps}); raise it to at least '

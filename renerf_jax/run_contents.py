@@ -23,7 +23,9 @@ def run_config(run_dir):
     raise RunDirError(f'{run_dir} is not a run directory (config.json / config.gin '
                       'missing); train first, e.g. python train.py '
                       '--gin_configs=gin_configs/demo.gin')
-  return load_config([path])
+  # reset_ignored: a config.gin written before settings the backbone ignores were
+  # refused still loads (they change nothing of the run).
+  return load_config([path], reset_ignored=True)
 
 
 @dataclasses.dataclass(frozen=True)

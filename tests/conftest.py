@@ -54,6 +54,9 @@ def tiny_config(**kw):
               batch_size_random=64, patch_size=4, print_every=10, eval_every=10,
               checkpoint_every=10, render_chunk=512, pseudo_until_frac=0.5,
               lpips_nets=('alex',), mask_signal='laplace')  # masks in tests: the Laplace path
+  if kw.get('backbone') == 'gaussians':  # the NeRF's sizes: settings the Gaussians refuse
+    from renerf_jax.config_fields import ignored_by  # pylint: disable=g-import-not-at-top
+    base = {k: v for k, v in base.items() if k not in ignored_by(Config, 'gaussians')}
   base.update(kw)
   return Config(**base)
 

@@ -56,14 +56,15 @@ def _bindings(path):
 
 
 def test_defaults_have_one_source():
-  """The RegNeRF llff3 values live in Config only: llff3.gin and renerf.gin bind nothing
-  that equals a default (a restated default would be a second source of truth)."""
-  for name in ('llff3.gin', 'renerf.gin'):
+  """The RegNeRF llff3 values live in Config only: llff3.gin, the data it shares with the
+  Gaussians (llff3_data.gin) and renerf.gin bind nothing that equals a default (a restated
+  default would be a second source of truth)."""
+  for name in ('llff3.gin', 'llff3_data.gin', 'renerf.gin'):
     only = _gin(name)
     for field in _bindings(os.path.join(GIN, name)):
       assert getattr(only, field) != getattr(Config(), field), (name, field)
-  assert set(_bindings(os.path.join(GIN, 'llff3.gin'))) == {
-      'data_dir', 'eval_every', 'checkpoint_every'}
+  assert set(_bindings(os.path.join(GIN, 'llff3.gin'))) == {'eval_every', 'checkpoint_every'}
+  assert set(_bindings(os.path.join(GIN, 'llff3_data.gin'))) == {'data_dir'}
   assert _gin('llff3.gin') == dataclasses.replace(
       Config(), data_dir='../shared/data/nerf_llff_data', eval_every=5000,
       checkpoint_every=2500)
@@ -280,3 +281,148 @@ def test_bad_ray_mix_or_k_is_one_config_error():
   load_config(['llff3.gin', 'renerf.gin'], ['Config.pseudo_until_frac = 0.007',
                                             "Config.pseudo_schedule = 'all'"])
   assert pseudo_steps(load_config(['llff3.gin', 'renerf.gin'])) == 5023  # 7.2% of 69768
+
+
+# ------------------------------------------------------------------ fields by backbone
+
+
+def _other_value(value):
+  """A value unlike `value` of the same kind (a field set away from its default)."""
+  if isinstance(value, bool):
+    return not value
+  if isinstance(value, (int, float)):
+    return value + 1
+  if isinstance(value, str):
+    return value + 'x'
+  return tuple(value) + (value[:1] or ('x',))
+
+
+def test_every_field_declares_its_concern_and_backbone():
+  from renerf_jax import config_fields  # pylint: disable=g-import-not-at-top
+  for f in dataclasses.fields(Config):
+    assert f.metadata['backbone'] in ('nerf', 'gaussians', 'both'), f.name
+    assert f.metadata['group'] in config_fields.GROUPS, f.name
+    assert f.metadata['affects'] in config_fields.AFFECTS, f.name
+    # A NeRF or Gaussians concern is read by that backbone alone.
+    if f.metadata['group'] in ('nerf', 'gaussians'):
+      assert f.metadata['backbone'] == f.metadata['group'], f.name
+    assert (f.metadata['backbone'] == 'gaussians') == f.name.startswith('gs_'), f.name
+  # Fields the code reads on both paths (datasets, pseudo-view poses, the round driver,
+  # the run directory, evaluation) or on the NeRF's alone.
+  for name in ('data_dir', 'use_ndc', 'white_bkgd', 'seed', 'init_seed', 'max_steps',
+               'random_pose_spread', 'pseudo_until_frac', 'renerf_init', 'use_masks',
+               'mask_signal', 'mask_keep_frac', 'eval_every', 'eval_stride', 'lpips_nets'):
+    assert config_fields.field_backbone(Config, name) == 'both', name
+  for name in ('batch_size', 'lr_init', 'anneal_nearfar', 'pseudo_mix', 'pseudo_frac',
+               'hessian_rays', 'render_chunk', 'near_camera_loss_mult', 'grid_box'):
+    assert config_fields.field_backbone(Config, name) == 'nerf', name
+
+
+def test_a_nerf_setting_on_the_gaussians_is_one_clear_error():
+  with pytest.raises(ConfigError) as e:
+    load_config(['gaussians_llff3.gin'], ['Config.lr_init = 0.01'])
+  assert str(e.value) == ("Config.lr_init=0.01 is a NeRF setting; "
+                          "Config.backbone='gaussians' ignores it")
+  with pytest.raises(ConfigError, match=r"^Config.anneal_nearfar=False is a NeRF setting; "
+                                        r"Config.backbone='gaussians' ignores it$"):
+    load_config(['gaussians_llff3_cpu.gin', 'modifiers/no_anneal.gin'])
+  gaussians = load_config(['gaussians_llff3.gin'])
+  with pytest.raises(ConfigError, match='Config.near_camera_loss_mult=1.0 is a NeRF setting'):
+    dataclasses.replace(gaussians, near_camera_loss_mult=1.)
+  # Every NeRF field, alone away from its default, is named.
+  for f in dataclasses.fields(Config):
+    if f.metadata['backbone'] == 'nerf':
+      value = _other_value(f.default)
+      with pytest.raises(ConfigError, match=rf'^Config\.{f.name}=.* is a NeRF setting; '):
+        dataclasses.replace(gaussians, **{f.name: value})
+
+
+def test_a_gaussians_setting_on_the_nerf_is_one_clear_error():
+  with pytest.raises(ConfigError) as e:
+    load_config(['llff3.gin'], ['Config.gs_capacity = 100'])
+  assert str(e.value) == ("Config.gs_capacity=100 is a Gaussians setting; "
+                          "Config.backbone='nerf' ignores it")
+  nerf = load_config(['llff3_fast.gin'])
+  for f in dataclasses.fields(Config):
+    if f.metadata['backbone'] == 'gaussians':
+      with pytest.raises(ConfigError, match=rf'^Config\.{f.name}=.* is a Gaussians setting; '
+                                            r"Config.backbone='nerf' ignores it"):
+        dataclasses.replace(nerf, **{f.name: _other_value(f.default)})
+  # A setting at its default is no setting: either backbone takes it, lists as tuples.
+  assert load_config(['gaussians_llff3.gin'], ['Config.lr_init = 2e-3',
+                                               'Config.grid_box = [[-1, -1, -1], [1, 1, 1]]'])
+  assert load_config(['llff3.gin'], ['Config.gs_background = [0, 0, 0]'])
+
+
+def test_every_shipped_config_loads_and_binds_only_what_its_backbone_reads():
+  """Every config of gin_configs/ and experiments/configs/ loads (no field its backbone
+  ignores away from its default, through its includes too); the Gaussian ones and the
+  NeRF ones share the LLFF data through llff3_data.gin."""
+  from renerf_jax.config_fields import ignored_settings  # pylint: disable=g-import-not-at-top
+  backbones = {}
+  for path in TOP_LEVEL:
+    c = load_config([path])
+    assert not ignored_settings(c), path
+    backbones.setdefault(c.backbone, []).append(os.path.basename(path))
+  assert {'gaussians_llff3.gin', 'table_gaussians.gin'} <= set(backbones['gaussians'])
+  assert {'llff3.gin', 'fox12.gin', 'table_converged2.gin'} <= set(backbones['nerf'])
+  for name in ('llff3.gin', 'gaussians_llff3.gin'):
+    with open(os.path.join(GIN, name)) as f:
+      assert re.findall(r"^include '(.+)'", f.read(), re.M) == ['llff3_data.gin'], name
+  data = _gin('llff3_data.gin')
+  for name in ('llff3.gin', 'gaussians_llff3.gin', 'gaussians_llff3_cpu.gin'):
+    c = _gin(name)
+    assert (c.data_dir, c.dataset_loader, c.factor, c.n_input_views, c.llffhold) == (
+        data.data_dir, 'llff', 8, 3, 8), name
+
+
+def test_the_near_far_annealing_bounds_k_of_the_nerf_only():
+  """K before the annealing ends is refused with the NeRF; the Gaussians have no
+  annealing (their 750-step table config puts K at step 202)."""
+  c = load_config([os.path.join(TABLES, 'table_gaussians.gin')], ['Config.num_rounds = 1'])
+  assert pseudo_steps(c) == 202 and c.anneal_nearfar == Config().anneal_nearfar
+  with pytest.raises(ConfigError, match='before the near/far annealing ends'):
+    load_config(['llff3.gin', 'renerf.gin'], ['Config.max_steps = 750',
+                                              'Config.pseudo_until_frac = 0.27'])
+
+
+def test_runs_saved_with_an_ignored_setting_still_resume_and_load(tmp_path):
+  """A Gaussian run made before the check (its config.json / config.gin with the old
+  gaussians_llff3.gin's anneal_nearfar = False) compares equal to today's config and
+  loads as a run directory; a field the backbone reads still differs."""
+  from renerf_jax.configs import config_differences, config_to_gin  # pylint: disable=g-import-not-at-top
+  from renerf_jax.report import to_jsonable  # pylint: disable=g-import-not-at-top
+  c = load_config(['gaussians_llff3_cpu.gin'])
+  saved = dict(to_jsonable(dataclasses.asdict(c)), anneal_nearfar=False)
+  assert config_differences(c, saved) == []
+  assert config_differences(c, dict(saved, gs_min_opacity=0.5)) == ['gs_min_opacity']
+  assert config_differences(c, dict(saved, backbone='nerf')) == ['backbone']
+  old = tmp_path / 'config.gin'
+  old.write_text(config_to_gin(c) + 'Config.anneal_nearfar = False\n')
+  with pytest.raises(ConfigError, match='anneal_nearfar=False is a NeRF setting'):
+    load_config([str(old)])
+  assert load_config([str(old)], reset_ignored=True) == c
+  # A config.gin written now reads back identically, in the declaration order.
+  new = tmp_path / 'new.gin'
+  new.write_text(config_to_gin(c))
+  assert load_config([str(new)]) == load_config([str(new)], reset_ignored=True) == c
+  assert [line.split(' = ')[0][len('Config.'):] for line in config_to_gin(c).splitlines()] == [
+      f.name for f in dataclasses.fields(Config)]
+
+
+def test_docs_list_every_field_under_its_concern_and_backbone():
+  """docs/configs.md, "Config fields by concern": one section per concern, the fields of
+  each backbone tag on lines starting 'both backbones', 'NeRF only', 'Gaussians only'."""
+  from renerf_jax.config_fields import GROUPS, fields_by_group  # pylint: disable=g-import-not-at-top
+  with open(os.path.join(REPO, 'docs', 'configs.md')) as f:
+    text = f.read().split('## Config fields by concern')[1].split('\n## ')[0]
+  labels = {'both backbones': 'both', 'NeRF only': 'nerf', 'Gaussians only': 'gaussians'}
+  sections = re.split(r'^### ', text, flags=re.M)[1:]
+  want = fields_by_group(Config)
+  assert len(sections) == len(want)
+  for (group, by_tag), section in zip(want.items(), sections):
+    assert section.startswith(GROUPS[group]), (group, section[:60])
+    got = {}
+    for label, names in re.findall(r'^- ([^:(]+?)(?: \(.*?\))?: (.+)$', section, re.M):
+      got.setdefault(labels[label], []).extend(re.findall(r'`(\w+)`', names))
+    assert {k: tuple(v) for k, v in got.items()} == by_tag, group

@@ -24,8 +24,8 @@ STEPS = 120
 # argument: each distinct one compiles anew). Higher colour / position lrs than 3DGS so
 # 120 steps show progress; densify every 12 steps from 12 to 96, no opacity reset in
 # the run (tested on its own), the tile cap loose at this image size.
-CFG = tiny_config(procedural_size=(24, 32), max_steps=STEPS, print_every=1,
-                  checkpoint_every=60, eval_every=40, gs_capacity=1536,
+CFG = tiny_config(backbone='gaussians', procedural_size=(24, 32), max_steps=STEPS,
+                  print_every=1, checkpoint_every=60, eval_every=40, gs_capacity=1536,
                   gs_init_points=512, gs_tile_cap=512, gs_densify_from_frac=0.1,
                   gs_densify_until_frac=0.8, gs_densify_every_frac=0.1,
                   gs_opacity_reset_every_frac=1., gs_sh_interval_frac=0.25,
@@ -459,7 +459,7 @@ def test_renerf_rounds_run_on_gaussians_and_resume(scene, tmp_path):
   renders become the pseudo-views, D draws them only before K, finished rounds load."""
   from flax import serialization  # pylint: disable=g-import-not-at-top
   from renerf_jax import backbones, resume  # pylint: disable=g-import-not-at-top
-  cfg = dataclasses.replace(CFG, backbone='gaussians', num_rounds=1, interp_factors='0.5',
+  cfg = dataclasses.replace(CFG, num_rounds=1, interp_factors='0.5',
                             lpips_nets=())  # LPIPS-alex needs 31 px a side.
   run_dir = str(tmp_path / 'run')
   state = resume.run_rounds(cfg, scene, run_dir, show_progress=False)
