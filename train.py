@@ -3,10 +3,9 @@
 On several machines: the same command on each, with --coordinator_address,
 --num_processes and --process_id (docs/multi_host.md).
 """
-import os
 import sys
 
-from renerf_jax import cli, distributed, report, resume
+from renerf_jax import cli, distributed, report, round_driver, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import check_rounds_config, deltas_vs_baseline, rounds_table
 
@@ -21,14 +20,14 @@ def main(argv=None):
   if writer:
     print(f'scene {scene.name}: {len(scene.train_idx)} train / {len(scene.test_idx)} test '
           f'views at {scene.width}x{scene.height}; run directory {run_dir}', file=sys.stderr)
-  state = resume.run_rounds(config, scene, run_dir, show_progress=writer)
+  state = round_driver.run_rounds(config, scene, run_dir, show_progress=writer)
   if not writer:
     return
   table = rounds_table(state.metrics)
-  report.write_json(os.path.join(run_dir, 'rounds.json'), list(state.metrics))
+  json_path, md_path = rundir.rounds_table_paths(run_dir)
+  report.write_json(json_path, list(state.metrics))
   deltas = deltas_vs_baseline(state.metrics)
-  report.write_markdown(os.path.join(run_dir, 'rounds.md'),
-                        table + '\n' + ''.join(f'\n{d}\n' for d in deltas))
+  report.write_markdown(md_path, table + '\n' + ''.join(f'\n{d}\n' for d in deltas))
   print(table)
   for line in deltas:
     print(line)

@@ -49,8 +49,7 @@ def train_command(run_dir, args):
 def step_rate(run_dir, from_step):
   """Steps a second of step time between the first logged step >= from_step and the
   last (log.jsonl)."""
-  recs = [r for r in rundir.read_jsonl(os.path.join(run_dir, 'round_0', 'train',
-                                                    'log.jsonl'))
+  recs = [r for r in rundir.read_jsonl(rundir.round_log_path(run_dir, 0))
           if r.get('step', 0) >= from_step and 'time' in r]
   if len(recs) < 2:
     raise RuntimeError(f'{run_dir}: fewer than two log records after step {from_step}')
@@ -70,7 +69,7 @@ def run_condition(name, run_dir, args, shot_path=None):
     if name != 'alone':
       from playwright.sync_api import sync_playwright  # pylint: disable=g-import-not-at-top
       from renerf_jax.viewer import Viewer, ViewerOptions  # pylint: disable=g-import-not-at-top
-      ckpt = os.path.join(run_dir, 'round_0', 'train', 'checkpoints')
+      ckpt = rundir.round_checkpoints_dir(run_dir, 0)
       while not rundir.list_checkpoints(ckpt):
         if proc.poll() is not None:
           raise RuntimeError(f'training ended before its first checkpoint ({run_dir})')

@@ -39,11 +39,11 @@ import jax
 import numpy as np
 
 from experiments import tables
-from renerf_jax import jit_cache, report, training
+from renerf_jax import jit_cache, report, rundir, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import make_pools
-from renerf_jax.resume import run_rounds
+from renerf_jax.round_driver import run_rounds
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 
@@ -164,7 +164,7 @@ def main():
       state = run_rounds(cfg, scene, run_dir)
       m = dict(state.metrics[0], seed=seed)
       runs.append(m)
-      curve = report.read_json(os.path.join(run_dir, 'round_0', 'result.json'))['curve']
+      curve = report.read_json(rundir.result_path(rundir.round_dir(run_dir, 0)))['curve']
       curves[f'{label} (seed {seed})'] = [
           (c['step'] * sps if was_given else c['train_seconds'], c['eval_psnr'])
           for c in curve]

@@ -25,7 +25,7 @@ import os
 import sys
 
 from experiments.tables import command_line, mean_std
-from renerf_jax import cli, jit_cache, report, resume, rundir
+from renerf_jax import cli, jit_cache, report, round_driver, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.progress import progress_bar
@@ -57,10 +57,10 @@ def run_dir_of(root, scene, steps, seed):
 
 def finished(root, scene, steps, seed):
   """Metrics and curve of a finished baseline, or None."""
-  rdir = resume.round_dir(run_dir_of(root, scene, steps, seed), 0)
+  rdir = rundir.round_dir(run_dir_of(root, scene, steps, seed), 0)
   if not rundir.is_done(rdir):
     return None
-  return report.read_json(os.path.join(rdir, 'result.json'))
+  return report.read_json(rundir.result_path(rdir))
 
 
 def summarize(root, scenes, seeds, steps):
@@ -143,7 +143,7 @@ def main(argv=None):
     scene = load_scene(config)
     run_dir = run_dir_of(root, scene_name, n, seed)
     cli.check_run_dir(config, run_dir, create=True)
-    resume.run_rounds(config, scene, run_dir, show_progress=False)
+    round_driver.run_rounds(config, scene, run_dir, show_progress=False)
     jit_cache.release_compiled()
     bar.update(n)
   bar.close()

@@ -20,14 +20,14 @@ import os
 import numpy as np
 
 from experiments import tables
-from renerf_jax import report
+from renerf_jax import report, rundir
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 
 
 def read_run(run_dir, sec_per_step=None):
   """(curve [(seconds, cheap PSNR)], final metrics dict, steps) of a run's round_0."""
-  path = os.path.join(run_dir, 'round_0', 'result.json')
+  path = rundir.result_path(rundir.round_dir(run_dir, 0))
   if not os.path.isfile(path):
     raise SystemExit(f'error: {path} not found (an unfinished run?)')
   res = report.read_json(path)

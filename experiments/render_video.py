@@ -16,28 +16,25 @@ import os
 
 import imageio.v3 as iio
 import numpy as np
-from flax import serialization
 
 from experiments.tables import bindings_of
 from renerf_jax import poses as pose_lib
-from renerf_jax import renerf, report, resume, rundir
+from renerf_jax import report, round_driver, rundir
 from renerf_jax.backbones import get_backbone
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import downsample_scene, load_scene
 
 
 def load_params(config, run_dir, r):
-  rdir = resume.round_dir(run_dir, r)
+  rdir = rundir.round_dir(run_dir, r)
   if not rundir.is_done(rdir):
     raise SystemExit(f'error: {rdir} is not a finished round')
-  template = get_backbone(config).init_params(renerf.round_config(config, r))
-  with open(os.path.join(rdir, 'params.msgpack'), 'rb') as f:
-    return serialization.from_bytes(template, f.read())
+  return round_driver.load_round_params(config, rdir, r)
 
 
 def finished_rounds(run_dir):
   r = 0
-  while rundir.is_done(resume.round_dir(run_dir, r)):
+  while rundir.is_done(rundir.round_dir(run_dir, r)):
     r += 1
   return r
 

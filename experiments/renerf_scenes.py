@@ -51,7 +51,7 @@ import shlex
 import numpy as np
 
 from experiments import paired, tables
-from renerf_jax import jit_cache, renerf, report, resume, rundir
+from renerf_jax import jit_cache, renerf, report, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 
@@ -196,11 +196,11 @@ def control_config(config, seed, steps):
 def finished_rounds(run_dir):
   """The rounds of a run whose every round is finished (read as it is: --no_r1 neither
   trains R1 nor rewrites such a run's config), else 0 (B alone)."""
-  path = os.path.join(run_dir, 'config.json')
+  path = rundir.config_json_path(run_dir)
   if not os.path.isfile(path):
     return 0
   n = int(report.read_json(path).get('num_rounds', 0))
-  done = all(rundir.is_done(resume.round_dir(run_dir, r)) for r in range(n + 1))
+  done = all(rundir.is_done(rundir.round_dir(run_dir, r)) for r in range(n + 1))
   return n if done else 0
 
 

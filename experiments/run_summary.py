@@ -19,14 +19,15 @@ import imageio.v3 as iio
 import numpy as np
 
 from experiments import tables
-from renerf_jax import report, resume
+from renerf_jax import report, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
+from renerf_jax.evaluation import view_name
 
 
 def summarise(run_dir):
   """(row dict, curve [(seconds, test PSNR)]) of round 0 of a finished run."""
-  path = os.path.join(resume.round_dir(run_dir, 0), 'result.json')
+  path = rundir.result_path(rundir.round_dir(run_dir, 0))
   if not os.path.isfile(path):
     raise SystemExit(f'error: {path} does not exist (round 0 of {run_dir} unfinished?)')
   result = report.read_json(path)
@@ -45,11 +46,11 @@ def summarise(run_dir):
 
 def photo_and_render(run_dir, data_dir):
   """[H, 2W, 3] photo | render of the first test view."""
-  config = load_config([os.path.join(run_dir, 'config.gin')],
+  config = load_config([rundir.config_gin_path(run_dir)],
                        [f"Config.data_dir = '{data_dir}'"], reset_ignored=True)
   scene = load_scene(config)
   view = int(scene.test_idx[0])
-  png = os.path.join(resume.round_dir(run_dir, 0), 'eval', f'test_{view:03d}.png')
+  png = rundir.render_path(rundir.eval_dir(rundir.round_dir(run_dir, 0)), view_name(view))
   render = iio.imread(png)[..., :3].astype(np.float32) / 255.
   return np.concatenate([np.asarray(scene.images[view], np.float32), render], axis=1)
 

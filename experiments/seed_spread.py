@@ -10,7 +10,7 @@ import argparse
 import os
 
 from experiments import tables
-from renerf_jax import report
+from renerf_jax import report, rundir
 
 METRICS = (('psnr', 'PSNR', 2), ('ssim', 'SSIM', 3), ('lpips_alex', 'LPIPS-alex', 3))
 
@@ -39,8 +39,8 @@ def table_spreads(path):
 
 def view_spread(run_dirs, round_index=0):
   """Per test view: the std over runs of its PSNR ({'name', 'mean', 'std'}), worst first."""
-  per_run = [report.read_json(os.path.join(d, f'round_{round_index}', 'eval',
-                                           'metrics.json'))['per_image'] for d in run_dirs]
+  per_run = [report.read_json(rundir.metrics_path(rundir.eval_dir(rundir.round_dir(
+      d, round_index))))['per_image'] for d in run_dirs]
   names = [m['name'] for m in per_run[0]]
   rows = []
   for i, name in enumerate(names):

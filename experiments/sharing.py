@@ -27,7 +27,6 @@ import numpy as np
 from renerf_jax import pseudo_views, renerf, report, rundir
 from renerf_jax.backbones import get_backbone
 from renerf_jax.configs import config_differences, fields_where
-from renerf_jax.resume import round_dir
 from renerf_jax.uncertainty import laplace
 
 
@@ -202,7 +201,7 @@ def _copy_tree(src, dst, copied_from=None):
   shutil.rmtree(tmp, ignore_errors=True)
   shutil.copytree(src, tmp)
   if copied_from:
-    report.write_json(os.path.join(tmp, 'copied_from.json'), {'from': copied_from})
+    report.write_json(rundir.copied_from_path(tmp), {'from': copied_from})
   os.replace(tmp, dst)
 
 
@@ -217,10 +216,10 @@ def copy_baseline(config, src_run_dir, dst_run_dir):
       the destination already has a round_0.
   """
   from renerf_jax.errors import RunDirError  # pylint: disable=g-import-not-at-top
-  src, dst = round_dir(src_run_dir, 0), round_dir(dst_run_dir, 0)
+  src, dst = rundir.round_dir(src_run_dir, 0), rundir.round_dir(dst_run_dir, 0)
   if not rundir.is_done(src):
     raise RunDirError(f'{src} is not a finished round (no DONE): nothing to copy')
-  cfg_path = os.path.join(src_run_dir, 'config.json')
+  cfg_path = rundir.config_json_path(src_run_dir)
   if not os.path.isfile(cfg_path):
     raise RunDirError(f'{cfg_path} missing: cannot tell which config trained {src}')
   diff = baseline_differences(config, report.read_json(cfg_path))
@@ -243,18 +242,18 @@ def copy_finished_rounds(config, src_run_dir, dst_run_dir):
   Returns:
     The rounds copied (a list of ints; empty when src does not qualify).
   """
-  cfg_path = os.path.join(src_run_dir, 'config.json')
+  cfg_path = rundir.config_json_path(src_run_dir)
   if (os.path.abspath(src_run_dir) == os.path.abspath(dst_run_dir)
       or not os.path.isfile(cfg_path)
       or config_differences(config, report.read_json(cfg_path), ('num_rounds',))):
     return []
   copied = []
   for r in range(1, config.num_rounds + 1):
-    src, dst = round_dir(src_run_dir, r), round_dir(dst_run_dir, r)
+    src, dst = rundir.round_dir(src_run_dir, r), rundir.round_dir(dst_run_dir, r)
     if os.path.exists(dst):
       continue
     if not rundir.is_done(src) or not _same_bytes(
-        *(os.path.join(round_dir(d, r - 1), 'params.msgpack')
+        *(rundir.params_path(rundir.round_dir(d, r - 1))
           for d in (src_run_dir, dst_run_dir))):
       break
     _copy_tree(src, dst, copied_from=os.path.abspath(src))
@@ -273,16 +272,16 @@ def share_pseudo_views(config, src_run_dir, dst_run_dir):
   Returns:
     True if copied, False if src does not qualify (nothing is written then).
   """
-  src = os.path.join(round_dir(src_run_dir, 1), 'pseudo_views')
-  dst = os.path.join(round_dir(dst_run_dir, 1), 'pseudo_views')
-  cfg_path = os.path.join(src_run_dir, 'config.json')
+  src = rundir.pseudo_views_dir(rundir.round_dir(src_run_dir, 1))
+  dst = rundir.pseudo_views_dir(rundir.round_dir(dst_run_dir, 1))
+  cfg_path = rundir.config_json_path(src_run_dir)
   if (os.path.abspath(src_run_dir) == os.path.abspath(dst_run_dir) or os.path.exists(dst)
-      or not all(os.path.isfile(os.path.join(src, f)) for f in ('views.npz', 'timing.json'))
+      or not all(os.path.isfile(f(src)) for f in (rundir.views_npz_path, rundir.timing_path))
       or not os.path.isfile(cfg_path)):
     return False
   if config_differences(config, report.read_json(cfg_path),
                         NOT_PSEUDO_VIEW_FIELDS) or not _same_bytes(
-      *(os.path.join(round_dir(d, 0), 'params.msgpack') for d in (src_run_dir, dst_run_dir))):
+      *(rundir.params_path(rundir.round_dir(d, 0)) for d in (src_run_dir, dst_run_dir))):
     return False
   _copy_tree(src, dst, copied_from=os.path.abspath(src))
   return True

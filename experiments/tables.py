@@ -38,7 +38,7 @@ import sys
 import numpy as np
 
 from experiments import sharing
-from renerf_jax import cli, jit_cache, report, resume, rundir
+from renerf_jax import cli, jit_cache, report, round_driver, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 
@@ -139,7 +139,7 @@ def curve_of(run_dir, rounds):
   """(cumulative seconds, cheap test PSNR) over the rounds of one run."""
   pts = []
   for r in range(rounds + 1):
-    path = os.path.join(resume.round_dir(run_dir, r), 'result.json')
+    path = rundir.result_path(rundir.round_dir(run_dir, r))
     pts += [(c['time'], c['eval_psnr']) for c in report.read_json(path)['curve']]
   return pts
 
@@ -160,21 +160,21 @@ def run_seed(config, scene, run_dir, share_from=()):
   """
   cli.check_run_dir(config, run_dir, create=True)
   copied = None
-  if not os.path.exists(resume.round_dir(run_dir, 0)):
+  if not os.path.exists(rundir.round_dir(run_dir, 0)):
     for src in share_from:
-      cfg_path = os.path.join(src, 'config.json')
+      cfg_path = rundir.config_json_path(src)
       if (os.path.abspath(src) != os.path.abspath(run_dir)
-          and rundir.is_done(resume.round_dir(src, 0)) and os.path.isfile(cfg_path)
+          and rundir.is_done(rundir.round_dir(src, 0)) and os.path.isfile(cfg_path)
           and not sharing.baseline_differences(config, report.read_json(cfg_path))):
         sharing.copy_baseline(config, src, run_dir)
         copied = src
         break
-  elif os.path.isfile(os.path.join(run_dir, 'shared_baseline.json')):
-    copied = report.read_json(os.path.join(run_dir, 'shared_baseline.json'))['from']
+  elif os.path.isfile(rundir.shared_baseline_path(run_dir)):
+    copied = report.read_json(rundir.shared_baseline_path(run_dir))['from']
   if copied:
-    report.write_json(os.path.join(run_dir, 'shared_baseline.json'), {'from': copied})
+    report.write_json(rundir.shared_baseline_path(run_dir), {'from': copied})
   rounds_from = None
-  if config.num_rounds > 0 and rundir.is_done(resume.round_dir(run_dir, 0)):
+  if config.num_rounds > 0 and rundir.is_done(rundir.round_dir(run_dir, 0)):
     for src in share_from:  # Whole rounds, if another run made them with this config.
       if sharing.copy_finished_rounds(config, src, run_dir):
         break
@@ -182,11 +182,11 @@ def run_seed(config, scene, run_dir, share_from=()):
       if sharing.share_pseudo_views(config, src, run_dir):
         break
   for r in range(1, config.num_rounds + 1):
-    path = os.path.join(resume.round_dir(run_dir, r), 'copied_from.json')
+    path = rundir.copied_from_path(rundir.round_dir(run_dir, r))
     if os.path.isfile(path):
       rounds_from = os.path.dirname(report.read_json(path)['from'])
-  state = resume.run_rounds(config, scene, run_dir,
-                            synthesize_fn=sharing.memo_synthesize)
+  state = round_driver.run_rounds(config, scene, run_dir,
+                                  synthesize_fn=sharing.memo_synthesize)
   # The next run's Config (seed, variant) differs, so none of this run's executables is
   # called again; kept, their memory mappings pile up over a table's runs.
   jit_cache.release_compiled()
@@ -237,7 +237,7 @@ def synthesis_seconds(run_dir, r):
   """Seconds of round r's pseudo-view synthesis (0 for the baseline), from its timing.json."""
   if r == 0:
     return 0.
-  path = os.path.join(resume.round_dir(run_dir, r), 'pseudo_views', 'timing.json')
+  path = rundir.timing_path(rundir.pseudo_views_dir(rundir.round_dir(run_dir, r)))
   if not os.path.isfile(path):
     raise SystemExit(f'error: {path} not found (round {r} has no synthesis timing)')
   return report.read_json(path)['seconds']

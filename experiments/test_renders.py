@@ -17,9 +17,10 @@ import os
 import imageio.v3 as iio
 import numpy as np
 
-from renerf_jax import report, resume, rundir
+from renerf_jax import report, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
+from renerf_jax.evaluation import view_name
 
 # (column title, row folder of renerf_scenes.py, round)
 COLUMNS = (('B', 'Re-Nerfing', 0), ('R1', 'Re-Nerfing', 1), ('B 2x longer', 'B 2x steps', 0))
@@ -28,12 +29,12 @@ COLUMNS = (('B', 'Re-Nerfing', 0), ('R1', 'Re-Nerfing', 1), ('B 2x longer', 'B 2
 def round_render(run_dir, r, view):
   """(image [H, W, 3] in [0, 1], PSNR) of test view `view` (its index in the scene) of
   round r of a finished run. Raises SystemExit with one line if it is missing."""
-  rdir = resume.round_dir(run_dir, r)
-  png = os.path.join(rdir, 'eval', f'test_{view:03d}.png')
+  rdir, name = rundir.round_dir(run_dir, r), view_name(view)
+  png = rundir.render_path(rundir.eval_dir(rdir), name)
   if not rundir.is_done(rdir) or not os.path.isfile(png):
     raise SystemExit(f'error: {png} does not exist (round {r} of {run_dir} unfinished?)')
-  per_image = report.read_json(os.path.join(rdir, 'eval', 'metrics.json'))['per_image']
-  psnr = [m['psnr'] for m in per_image if m['name'] == f'test_{view:03d}']
+  per_image = report.read_json(rundir.metrics_path(rundir.eval_dir(rdir)))['per_image']
+  psnr = [m['psnr'] for m in per_image if m['name'] == name]
   return iio.imread(png)[..., :3].astype(np.float32) / 255., psnr[0] if psnr else None
 
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from experiments import tables
 from experiments.render_video import load_params, run_config, run_parser
-from renerf_jax import report, resume
+from renerf_jax import report, round_driver, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.pseudo_views import side_by_side, uncertainty_heatmap
 
@@ -43,7 +43,7 @@ def main(argv=None):
                      'a finished run is never written to')
   scene = load_scene(config)
   params = load_params(config, args.run_dir, args.round)
-  pv, timing, _ = resume.stored_synthesis(args.work_dir)(config, scene, params, True)
+  pv, timing, _ = round_driver.stored_synthesis(args.work_dir)(config, scene, params, True)
   seconds = timing['seconds']
   n = pv.images.shape[0]
   bad = [v for v in args.views if not 0 <= v < n]
@@ -57,7 +57,7 @@ def main(argv=None):
   out = dict(timing, views=args.views, run_dir=args.run_dir, round=args.round,
              hessian_rays=config.hessian_rays, deform_log2_res=config.deform_log2_res,
              command=tables.command_line('experiments.uncertainty_panel'))
-  nxt = os.path.join(resume.round_dir(args.run_dir, args.round + 1), 'result.json')
+  nxt = rundir.result_path(rundir.round_dir(args.run_dir, args.round + 1))
   if os.path.isfile(nxt):
     round_s = report.read_json(nxt)['metrics']['round_seconds']
     out['next_round_seconds_without_masks'] = round_s

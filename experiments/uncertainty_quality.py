@@ -31,7 +31,7 @@ import time
 import numpy as np
 
 from experiments.tables import command_line, mean_std
-from renerf_jax import cli, contraction, jit_cache, report, resume, rundir
+from renerf_jax import cli, contraction, jit_cache, report, round_driver, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import camera_rays, load_scene, ray_pool
 from renerf_jax.progress import progress_bar
@@ -126,10 +126,10 @@ def run_one(args, root, scene_name, seed):
   cli.check_run_dir(config, run_dir, create=True)
   if os.path.isfile(qpath) and os.path.isfile(npath) and not args.recompute:
     q = report.read_json(qpath)
-    if q.get('version') == SIGNALS_VERSION and rundir.is_done(resume.round_dir(run_dir, 0)):
+    if q.get('version') == SIGNALS_VERSION and rundir.is_done(rundir.round_dir(run_dir, 0)):
       print(f'{scene_name} seed{seed}: reused {qpath}', file=sys.stderr)
       return q
-  state = resume.run_rounds(config, scene, run_dir, show_progress=False)
+  state = round_driver.run_rounds(config, scene, run_dir, show_progress=False)
   arrays, info = compute_run(config, scene, state.params, args.panel_view)
   with report.atomic_open(npath, 'wb') as f:
     np.savez_compressed(f, **arrays)

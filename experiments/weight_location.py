@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import renerf, report, resume
+from renerf_jax import renerf, report, round_driver, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import camera_rays, load_scene
 from renerf_jax.model import empty_outside_box, render_rays
@@ -62,13 +62,13 @@ def main(argv=None):
   args = p.parse_args(argv)
   result = {}
   for run_dir in args.run_dir:
-    config = load_config([os.path.join(run_dir, 'config.gin')], args.gin_bindings)
+    config = load_config([rundir.config_gin_path(run_dir)], args.gin_bindings)
     scene = load_scene(config)
     cfg = renerf.round_config(config, args.round)
-    rdir = resume.round_dir(run_dir, args.round)
-    state = resume.load_round(config, rdir, renerf.RoundState(
+    rdir = rundir.round_dir(run_dir, args.round)
+    state = round_driver.load_round(config, rdir, renerf.RoundState(
         params=None, pseudo=None, round_index=args.round - 1))
-    per_image = report.read_json(os.path.join(rdir, 'eval', 'metrics.json'))['per_image']
+    per_image = report.read_json(rundir.metrics_path(rundir.eval_dir(rdir)))['per_image']
     centres = jnp.asarray(scene.poses[scene.train_idx][:, :3, 3])
     rows = []
     for i, idx in enumerate(scene.test_idx):

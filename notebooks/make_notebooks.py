@@ -20,7 +20,7 @@ import numpy as np
 import matplotlib.pyplot as plt
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax import renerf, report, resume
+from renerf_jax import renerf, report, round_driver, rundir
 
 SMALL = os.environ.get('RENERF_NOTEBOOK_SMALL') == '1'
 repo = os.path.abspath('..')
@@ -38,7 +38,7 @@ for k, i in enumerate(scene.train_idx):
   plt.subplot(1, len(scene.train_idx), k + 1); plt.imshow(scene.images[i]); plt.axis('off')
 plt.suptitle('the three training views'); plt.show()'''),
     ('code', '''run_dir = tempfile.mkdtemp(prefix='renerf_quickstart_')
-state = resume.run_rounds(config, scene, run_dir)
+state = round_driver.run_rounds(config, scene, run_dir)
 print(renerf.rounds_table(state.metrics))'''),
     ('md', '## Pseudo-views, their uncertainty and masks'),
     ('code', '''pv = state.pseudo
@@ -53,7 +53,7 @@ print('kept fraction of pseudo pixels:', float(np.mean(pv.masks)))'''),
     ('md', '## Error against run time'),
     ('code', '''curves = {}
 for r in range(int(state.round_index) + 1):
-  res = report.read_json(os.path.join(run_dir, f'round_{r}', 'result.json'))
+  res = report.read_json(rundir.result_path(rundir.round_dir(run_dir, r)))
   curves['baseline' if r == 0 else f'round {r}'] = [(c['time'], c['eval_psnr']) for c in res['curve']]
 for label, pts in curves.items():
   t, v = zip(*pts); plt.plot(t, v, 'o-', label=label)
@@ -70,7 +70,8 @@ BYO = [
 import matplotlib.pyplot as plt
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax import renerf, resume
+from renerf_jax import renerf, round_driver, rundir
+from renerf_jax.evaluation import view_name
 
 DATA_DIR = os.environ.get('RENERF_DATA_DIR', os.path.abspath('../../shared/data/nerf_llff_data'))
 SCENE = os.environ.get('RENERF_SCENE', 'fern')
@@ -83,9 +84,9 @@ config = load_config([os.path.abspath('../gin_configs/llff3_cpu.gin')], bindings
 scene = load_scene(config)
 print(scene.name, scene.images.shape, 'train', scene.train_idx, 'test', scene.test_idx)'''),
     ('code', '''run_dir = tempfile.mkdtemp(prefix='renerf_byo_')
-state = resume.run_rounds(config, scene, run_dir)
+state = round_driver.run_rounds(config, scene, run_dir)
 print(renerf.rounds_table(state.metrics))'''),
-    ('code', '''img = plt.imread(os.path.join(run_dir, 'round_0', 'eval', f'test_{scene.test_idx[0]:03d}.png'))
+    ('code', '''img = plt.imread(rundir.render_path(rundir.eval_dir(rundir.round_dir(run_dir, 0)), view_name(scene.test_idx[0])))
 plt.figure(figsize=(10, 4))
 plt.subplot(1, 2, 1); plt.imshow(scene.images[scene.test_idx[0]]); plt.title('ground truth'); plt.axis('off')
 plt.subplot(1, 2, 2); plt.imshow(img); plt.title('rendered'); plt.axis('off'); plt.show()'''),

@@ -3,7 +3,7 @@
 Re-Nerfing is an add-on to any novel-view-synthesis backbone. A round needs five things
 of one, each a function of the Config and the Scene; only `train` (its checkpoints and
 log, through rundir, when given a directory) and `export` write files, the rest return
-arrays that resume.py writes (outputs.py):
+arrays that round_driver.py writes:
 
   init_params(config)                        -> a parameter template (loading a round)
   train(config, scene, out_dir, pseudo, ...) -> training.TrainResult, trained from scratch
@@ -20,14 +20,13 @@ extra files of a finished round (the Gaussians' .ply). `Config.backbone` picks o
 uncertainty masks unless Config.mask_signal = 'one_minus_acc').
 """
 import dataclasses
-import os
 import time
 from typing import Callable, Optional
 
 import jax
 import numpy as np
 
-from renerf_jax import metrics, pseudo_views, renerf, training
+from renerf_jax import metrics, pseudo_views, renerf, rundir, training
 from renerf_jax.datasets import camera_rays
 from renerf_jax.errors import ConfigError
 from renerf_jax.evaluation import cheap_eval_fn, evaluate_test_views, evaluate_views
@@ -183,7 +182,7 @@ def gaussians_export(params, rdir):
   """The round's Gaussians as rdir/point_cloud.ply, the reference 3DGS layout that
   splat viewers open (active Gaussians only)."""
   from renerf_jax.gaussians import ply  # pylint: disable=g-import-not-at-top
-  ply.write_ply(os.path.join(rdir, 'point_cloud.ply'), params)
+  ply.write_ply(rundir.point_cloud_path(rdir), params)
 
 
 GAUSSIANS = Backbone(name='gaussians', init_params=gaussians_init_params,

@@ -7,7 +7,7 @@ import sys
 import traceback
 from typing import Optional, Sequence
 
-from renerf_jax import distributed, jit_cache, report
+from renerf_jax import distributed, jit_cache, report, rundir
 from renerf_jax.configs import config_differences, config_to_gin, fields_where, load_config
 from renerf_jax.errors import USER_ERRORS, RunDirError
 
@@ -108,7 +108,7 @@ def check_run_dir(config, run_dir, create):
   configs.AFFECTS) raises RunDirError, so earlier results are never mixed with or
   overwritten by a different experiment. Only process 0 of a multi-process run writes.
   """
-  path = os.path.join(run_dir, 'config.json')
+  path = rundir.config_json_path(run_dir)
   write = create and distributed.is_writer()
   current = report.to_jsonable(dataclasses.asdict(config))
   if os.path.isfile(path):
@@ -128,7 +128,7 @@ def check_run_dir(config, run_dir, create):
     os.makedirs(run_dir, exist_ok=True)
     # config.json last: it marks the directory as made (a run killed in between would
     # otherwise never get its config.gin).
-    report.write_markdown(os.path.join(run_dir, 'config.gin'), config_to_gin(config))
+    report.write_markdown(rundir.config_gin_path(run_dir), config_to_gin(config))
     report.write_json(path, current)
   elif not create:
     raise RunDirError(f'no finished run in {run_dir} (config.json missing); train first '

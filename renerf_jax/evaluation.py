@@ -1,6 +1,6 @@
 """Test-view evaluation: cheap strided PSNR during training, full metrics at the end.
 
-Nothing here writes a file: outputs.save_evaluation does, at the edge (resume.py, eval.py).
+Nothing here writes a file: round_driver.save_evaluation does, at the edge (and eval.py).
 """
 import dataclasses
 
@@ -53,7 +53,7 @@ class Evaluation:
 
 
 def evaluate_test_views(config, scene, params, show_progress=True) -> Evaluation:
-  """Renders every test view of a NeRF and scores it (outputs.save_evaluation writes it).
+  """Renders every test view of a NeRF and scores it (saved by round_driver).
 
   Args:
     config: Config. scene: Scene. params: field parameters.
@@ -68,6 +68,11 @@ def evaluate_test_views(config, scene, params, show_progress=True) -> Evaluation
     return render_image(config, params, jax.tree_util.tree_map(lambda x: x[j], rays),
                         show_progress=show_progress, desc=f'test view {i}')
   return evaluate_views(config, scene, render_view)
+
+
+def view_name(i):
+  """The name of scene view i in metrics.json ('test_003'), also its renders' file name."""
+  return f'test_{int(i):03d}'
 
 
 def evaluate_views(config, scene, render_view) -> Evaluation:
@@ -86,7 +91,7 @@ def evaluate_views(config, scene, render_view) -> Evaluation:
     out = render_view(j, i)
     pred = np.clip(out['rgb'], 0., 1.)
     m = metrics.image_metrics(pred, scene.images[i], config.lpips_nets)
-    m['name'] = f'test_{int(i):03d}'
+    m['name'] = view_name(i)
     per_image.append(m)
     images.append(np.asarray(pred, np.float32))
     distances.append(np.asarray(out['distance'], np.float32))

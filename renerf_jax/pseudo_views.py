@@ -1,6 +1,6 @@
 """Pseudo-views: model B rendered at poses between neighbouring training cameras.
 
-Nothing here writes a file: outputs.save_pseudo_views does, at the edge (resume.py).
+Nothing here writes a file: round_driver.save_pseudo_views does, at the edge.
 """
 import time
 

@@ -9,9 +9,9 @@
 `round_step` is a pure function of (config, scene, state): it reads and writes no file
 and keeps no process-wide cache. It works on any model family through
 `backbones.Backbone` (`Config.backbone`): train on real + pseudo-views, render,
-evaluate. Persistence and resume (round_<r>/ directories, DONE markers, checkpoints)
-live at the edge, in `resume.py`, which hands the step its
-synthesis, training and evaluation functions bound to a round directory.
+evaluate. Persistence and resume (round_<r>/ directories, DONE markers, checkpoints;
+their paths in `rundir.py`) live at the edge, in `round_driver.py`, which hands the step
+its synthesis, training and evaluation functions bound to a round directory.
 """
 import dataclasses
 import time
@@ -171,7 +171,7 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
       training.TrainResult (kwargs: window, init_params, eval_fn, time_offset, desc,
       show_progress, as training.train_model takes them).
     evaluate_fn: (config, scene, params) -> evaluation.Evaluation.
-    resume.py binds them to a round directory.
+    round_driver.py binds them to a round directory.
 
   Returns:
     RoundState of round state.round_index + 1.
@@ -224,7 +224,7 @@ def check_rounds_config(config, scene):
 
 
 def run_rounds(config, scene, show_progress: bool = False) -> RoundState:
-  """Baseline plus config.num_rounds rounds in memory (resume.run_rounds: on disk)."""
+  """Baseline plus config.num_rounds rounds in memory (round_driver.run_rounds: on disk)."""
   check_rounds_config(config, scene)
   state = initial_state()
   for _ in range(config.num_rounds + 1):

@@ -12,14 +12,13 @@ from renerf_jax import rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.errors import RunDirError
-from renerf_jax.outputs import load_pseudo_views
-from renerf_jax.resume import params_template, round_dir
+from renerf_jax.round_driver import load_pseudo_views, load_round_params, params_template
 
 
 def run_config(run_dir):
   """The Config a run was made with (run_dir/config.gin, as train.py wrote it)."""
-  path = os.path.join(run_dir, 'config.gin')
-  if not os.path.isfile(os.path.join(run_dir, 'config.json')) or not os.path.isfile(path):
+  path = rundir.config_gin_path(run_dir)
+  if not os.path.isfile(rundir.config_json_path(run_dir)) or not os.path.isfile(path):
     raise RunDirError(f'{run_dir} is not a run directory (config.json / config.gin '
                       'missing); train first, e.g. python train.py '
                       '--gin_configs=gin_configs/demo.gin')
@@ -47,11 +46,10 @@ def list_rounds(config, run_dir):
   rounds and the first unfinished one if it has a checkpoint."""
   out = []
   for r in range(config.num_rounds + 1):
-    rdir = round_dir(run_dir, r)
-    if rundir.is_done(rdir):
+    if rundir.is_done(rundir.round_dir(run_dir, r)):
       out.append(RoundInfo(r, True, None))
       continue
-    ckpts = rundir.list_checkpoints(os.path.join(rdir, 'train', 'checkpoints'))
+    ckpts = rundir.list_checkpoints(rundir.round_checkpoints_dir(run_dir, r))
     if ckpts:
       out.append(RoundInfo(r, False, ckpts[-1][0]))
     break
@@ -66,12 +64,11 @@ def load_params(config, run_dir, r):
   so reading while training writes is safe; one removed between listing and reading
   (training keeps the last two) is retried once.
   """
-  rdir = round_dir(run_dir, r)
-  template = params_template(config, r)
+  rdir = rundir.round_dir(run_dir, r)
   if rundir.is_done(rdir):
-    with open(os.path.join(rdir, 'params.msgpack'), 'rb') as f:
-      return serialization.from_bytes(template, f.read()), None
-  ckpt_dir = os.path.join(rdir, 'train', 'checkpoints')
+    return load_round_params(config, rdir, r), None
+  template = params_template(config, r)
+  ckpt_dir = rundir.round_checkpoints_dir(run_dir, r)
   for _ in range(2):
     ckpts = rundir.list_checkpoints(ckpt_dir)
     if not ckpts:
@@ -88,19 +85,18 @@ def load_params(config, run_dir, r):
 
 def latest_checkpoint_step(run_dir, r) -> Optional[int]:
   """Step of round r's newest training checkpoint (None: none)."""
-  ckpts = rundir.list_checkpoints(os.path.join(round_dir(run_dir, r), 'train',
-                                               'checkpoints'))
+  ckpts = rundir.list_checkpoints(rundir.round_checkpoints_dir(run_dir, r))
   return ckpts[-1][0] if ckpts else None
 
 
 def round_pseudo_views(run_dir, r):
   """The PseudoViews round r trained on (None for B or before they are written)."""
-  return load_pseudo_views(os.path.join(round_dir(run_dir, r), 'pseudo_views'))
+  return load_pseudo_views(rundir.pseudo_views_dir(rundir.round_dir(run_dir, r)))
 
 
 def last_log_record(run_dir, r) -> Optional[dict]:
   """The last record of round r's training log (step, loss, PSNR, ...), None if empty."""
-  recs = rundir.read_jsonl(os.path.join(round_dir(run_dir, r), 'train', 'log.jsonl'))
+  recs = rundir.read_jsonl(rundir.round_log_path(run_dir, r))
   return recs[-1] if recs else None
 
 

@@ -1,7 +1,22 @@
-"""Run directories: atomic checkpoints, resume, JSONL logs. Side effects live here.
+"""The run directory: every path of a run, DONE markers, checkpoints and training logs.
 
-In a multi-process run (renerf_jax.distributed) only process 0 writes; every process
-reads the same files (a file system all hosts share)."""
+Every file name of a run is spelled here and nowhere else; the package, experiments,
+benchmarks and scripts derive paths with these functions:
+
+  <run_dir>/   config.json, config.gin (config_json_path, config_gin_path), rounds.json/.md
+               (rounds_table_paths), eval_rounds.json/.md (eval_rounds_paths),
+               error_vs_time.png, shared_baseline.json (experiments)
+    round_<r>/   round_dir: params.msgpack, result.json (params_path, result_path),
+                 point_cloud.ply (Gaussians), copied_from.json (experiments), DONE
+      train/          train_dir: checkpoints/ (checkpoints_dir, checkpoint_path), log.jsonl
+      eval/           eval_dir (eval_extra/: eval.py): metrics.json/.md, renders
+      pseudo_views/   pseudo_views_dir (r >= 1): views.npz, views.json, timing.json, PNGs
+
+Every write is atomic (report.atomic_open: temp file + fsync + rename); the temp files
+a killed write leaves are removed by remove_stale_temp_files. In a multi-process run
+(renerf_jax.distributed) only process 0 writes; every process reads the same files (a
+file system all hosts share).
+"""
 import glob
 import json
 import os
@@ -13,11 +28,201 @@ from flax import serialization
 
 from renerf_jax import distributed, report
 
-_CKPT = re.compile(r'checkpoint_(\d+)\.msgpack$')
+# ------------------------------------------------------------------- the run's layout
+
+
+def config_json_path(run_dir):
+  """The run's Config as JSON (written last when a run directory is made: it marks it)."""
+  return os.path.join(run_dir, 'config.json')
+
+
+def config_gin_path(run_dir):
+  """The run's operative gin config (what view.py and the experiments load)."""
+  return os.path.join(run_dir, 'config.gin')
+
+
+def rounds_table_paths(run_dir):
+  """(rounds.json, rounds.md): train.py's table of the rounds' metrics."""
+  return os.path.join(run_dir, 'rounds.json'), os.path.join(run_dir, 'rounds.md')
+
+
+def eval_rounds_paths(run_dir):
+  """(eval_rounds.json, eval_rounds.md): eval.py's tables."""
+  return os.path.join(run_dir, 'eval_rounds.json'), os.path.join(run_dir, 'eval_rounds.md')
+
+
+def error_vs_time_path(run_dir):
+  """eval.py's plot of the test PSNR against run time."""
+  return os.path.join(run_dir, 'error_vs_time.png')
+
+
+def shared_baseline_path(run_dir):
+  """The experiments' note of the run whose round_0 was copied into run_dir."""
+  return os.path.join(run_dir, 'shared_baseline.json')
+
+
+def round_dir(run_dir, r):
+  """Round r's directory (r = 0: the baseline B)."""
+  return os.path.join(run_dir, f'round_{r}')
+
+
+def train_dir(rdir):
+  """The training run's directory of the round in rdir (checkpoints, log)."""
+  return os.path.join(rdir, 'train')
+
+
+def eval_dir(rdir):
+  """The test evaluation a round wrote when it finished."""
+  return os.path.join(rdir, 'eval')
+
+
+def eval_extra_dir(rdir):
+  """eval.py's evaluation of a finished round with more metrics than it wrote."""
+  return os.path.join(rdir, 'eval_extra')
+
+
+def pseudo_views_dir(rdir):
+  """The pseudo-views the round in rdir trained on (rounds >= 1)."""
+  return os.path.join(rdir, 'pseudo_views')
+
+
+def params_path(rdir):
+  """A finished round's parameters (flax msgpack)."""
+  return os.path.join(rdir, 'params.msgpack')
+
+
+def result_path(rdir):
+  """A finished round's metrics and training curve (result.json)."""
+  return os.path.join(rdir, 'result.json')
+
+
+def point_cloud_path(rdir):
+  """The Gaussians' export of a finished round (the reference 3DGS .ply)."""
+  return os.path.join(rdir, 'point_cloud.ply')
+
+
+def copied_from_path(directory):
+  """The note of where a copied round (or pseudo-view folder) came from."""
+  return os.path.join(directory, 'copied_from.json')
+
+
+def done_path(directory):
+  """The DONE marker of a finished round (written last, atomically)."""
+  return os.path.join(directory, 'DONE')
+
+
+def checkpoints_dir(out_dir):
+  """The checkpoint folder of a training run's directory (a round's train_dir)."""
+  return os.path.join(out_dir, 'checkpoints')
+
+
+def log_path(out_dir):
+  """The JSONL log of a training run's directory (one record per logged step)."""
+  return os.path.join(out_dir, 'log.jsonl')
+
+
+def training_paths(out_dir):
+  """(checkpoint folder, log.jsonl path) of a training run's directory."""
+  return checkpoints_dir(out_dir), log_path(out_dir)
+
+
+def round_log_path(run_dir, r):
+  """Round r's training log."""
+  return log_path(train_dir(round_dir(run_dir, r)))
+
+
+def round_checkpoints_dir(run_dir, r):
+  """Round r's training checkpoints."""
+  return checkpoints_dir(train_dir(round_dir(run_dir, r)))
+
+
+def metrics_path(ev_dir):
+  """metrics.json of an evaluation folder (evaluation.Evaluation.summary())."""
+  return os.path.join(ev_dir, 'metrics.json')
+
+
+def metrics_md_path(ev_dir):
+  """metrics.md of an evaluation folder (the per-image table)."""
+  return os.path.join(ev_dir, 'metrics.md')
+
+
+def render_path(ev_dir, name):
+  """The render of the test view called `name` in metrics.json ('test_003')."""
+  return os.path.join(ev_dir, f'{name}.png')
+
+
+def depth_render_path(ev_dir, name):
+  """The depth map of the test view called `name` in metrics.json ('test_003')."""
+  return os.path.join(ev_dir, name.replace('test_', 'depth_', 1) + '.png')
+
+
+def views_npz_path(pv_dir):
+  """The pseudo-views' arrays (images, poses, masks, uncertainty)."""
+  return os.path.join(pv_dir, 'views.npz')
+
+
+def views_json_path(pv_dir):
+  """The pseudo-views' metadata (the synthesis's `meta`)."""
+  return os.path.join(pv_dir, 'views.json')
+
+
+def timing_path(pv_dir):
+  """The synthesis's timing, written last: it marks the pseudo-views as complete."""
+  return os.path.join(pv_dir, 'timing.json')
+
+
+def pseudo_view_png_path(pv_dir, kind, i):
+  """PNG of pseudo-view i: kind 'view', 'mask', 'uncertainty' or 'panel'."""
+  return os.path.join(pv_dir, f'{kind}_{i:03d}.png')
+
+
+# --------------------------------------------------------- markers and atomic writes
+
+
+def is_done(directory):
+  """Whether the round in `directory` is finished (its DONE marker exists)."""
+  return os.path.isfile(done_path(directory))
+
+
+def mark_done(directory, info=None):
+  """Writes the DONE marker (atomically) with `info` as its JSON."""
+  report.write_json(done_path(directory), info or {})
+
+
+def remove_stale_temp_files(directory):
+  """Deletes the temp files that killed atomic writes left under `directory` (recursive).
+
+  report.atomic_open writes '.<name>.<random>.tmp' next to its target and renames it over
+  the target; a SIGKILL (or power loss) before the rename leaves the temp file behind. It
+  is never read, but each one can be as large as a checkpoint. Call this only on a
+  directory no other process writes to (the unfinished round of this run).
+
+  Returns:
+    The removed paths.
+  """
+  removed = []
+  for root, _, files in os.walk(directory):
+    for name in files:
+      if name.startswith('.') and name.endswith('.tmp'):
+        path = os.path.join(root, name)
+        try:
+          os.remove(path)
+        except FileNotFoundError:
+          continue
+        removed.append(path)
+  return removed
+
+
+# ------------------------------------------------- checkpoints and training logs
 
 
 def checkpoint_path(directory, step):
+  """The checkpoint of `step` in a checkpoint folder."""
   return os.path.join(directory, f'checkpoint_{step:08d}.msgpack')
+
+
+_CKPT = re.compile(r'checkpoint_(\d+)\.msgpack$')
+_CKPT_GLOB = 'checkpoint_*.msgpack'
 
 
 def save_checkpoint(directory, target, step, keep=2):
@@ -37,7 +242,7 @@ def save_checkpoint(directory, target, step, keep=2):
 def list_checkpoints(directory):
   """[(step, path)] of complete checkpoints, sorted by step."""
   out = []
-  for path in glob.glob(os.path.join(directory, 'checkpoint_*.msgpack')):
+  for path in glob.glob(os.path.join(directory, _CKPT_GLOB)):
     m = _CKPT.search(path)
     if m:
       out.append((int(m.group(1)), path))
@@ -51,11 +256,6 @@ def restore_checkpoint(directory, template):
     return None
   with open(ckpts[-1][1], 'rb') as f:
     return serialization.from_bytes(template, f.read())
-
-
-def training_paths(out_dir):
-  """(checkpoint folder, log.jsonl path) of a training run's directory."""
-  return os.path.join(out_dir, 'checkpoints'), os.path.join(out_dir, 'log.jsonl')
 
 
 def resume_training(out_dir, state):
@@ -191,35 +391,3 @@ def truncate_jsonl(path, max_step):
     with report.atomic_open(path, 'w') as f:
       for rec in recs:
         f.write(json.dumps(rec) + '\n')
-
-
-def remove_stale_temp_files(directory):
-  """Deletes the temp files that killed atomic writes left under `directory` (recursive).
-
-  report.atomic_open writes '.<name>.<random>.tmp' next to its target and renames it over
-  the target; a SIGKILL (or power loss) before the rename leaves the temp file behind. It
-  is never read, but each one can be as large as a checkpoint. Call this only on a
-  directory no other process writes to (the unfinished round of this run).
-
-  Returns:
-    The removed paths.
-  """
-  removed = []
-  for root, _, files in os.walk(directory):
-    for name in files:
-      if name.startswith('.') and name.endswith('.tmp'):
-        path = os.path.join(root, name)
-        try:
-          os.remove(path)
-        except FileNotFoundError:
-          continue
-        removed.append(path)
-  return removed
-
-
-def is_done(directory):
-  return os.path.isfile(os.path.join(directory, 'DONE'))
-
-
-def mark_done(directory, info=None):
-  report.write_json(os.path.join(directory, 'DONE'), info or {})

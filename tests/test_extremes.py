@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from conftest import REPO, tiny_config
 
-from renerf_jax import cameras, mip, renerf, resume
+from renerf_jax import cameras, mip, renerf, round_driver
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.errors import ConfigError
 from renerf_jax.fields import init_field_params
@@ -189,14 +189,15 @@ def test_single_training_view_with_interpolation_is_one_config_error(tmp_path):
   assert len(scene.train_idx) == 1
   for targets in ('interp', 'interp+test'):
     with pytest.raises(ConfigError, match='at least 2 training views') as e:
-      resume.run_rounds(dataclasses.replace(config, pseudo_targets=targets), scene,
-                        str(tmp_path / 'run'), show_progress=False)
+      round_driver.run_rounds(dataclasses.replace(config, pseudo_targets=targets), scene,
+                              str(tmp_path / 'run'), show_progress=False)
     assert '\n' not in str(e.value) and "pseudo_targets='test'" in str(e.value)
   # So is every other pseudo-view setting round 1 could not use.
   with pytest.raises(ConfigError, match='interp_factors'):
-    resume.run_rounds(dataclasses.replace(config, n_input_views=2, interp_factors='0.5,2'),
-                      load_scene(dataclasses.replace(config, n_input_views=2)),
-                      str(tmp_path / 'run'), show_progress=False)
+    round_driver.run_rounds(
+        dataclasses.replace(config, n_input_views=2, interp_factors='0.5,2'),
+        load_scene(dataclasses.replace(config, n_input_views=2)), str(tmp_path / 'run'),
+        show_progress=False)
   assert not os.path.exists(tmp_path / 'run')  # Raised before anything was written.
   # The documented fallbacks are accepted: test poses as pseudo-views, or no rounds.
   renerf.check_rounds_config(dataclasses.replace(config, pseudo_targets='test'), scene)

@@ -349,7 +349,7 @@ def test_training_raises_the_train_psnr(scene, full_run):
   s = res.state
   assert int(s.step) == STEPS and int(s.nan_skips) == 0
   assert int(s.params.active.sum()) > CFG.gs_init_points  # Densification added some.
-  recs = rundir.read_jsonl(os.path.join(out, 'log.jsonl'))
+  recs = rundir.read_jsonl(rundir.log_path(out))
   assert [r['step'] for r in recs] == list(range(1, STEPS + 1))
   for key in ('step', 'train_seconds', 'time', 'loss', 'psnr', 'lr', 'nan_skips',
               'pseudo_rays', 'num_gaussians', 'cap_bound'):
@@ -373,13 +373,13 @@ def test_resume_is_bit_for_bit(scene, full_run, tmp_path, monkeypatch):
   out = str(tmp_path / 'b')
   with pytest.raises(KeyboardInterrupt):
     gtrain.train_gaussians(CFG, scene, out, None, show_progress=False)
-  assert [s for s, _ in rundir.list_checkpoints(os.path.join(out, 'checkpoints'))] == [60]
+  assert [s for s, _ in rundir.list_checkpoints(rundir.checkpoints_dir(out))] == [60]
   calls.clear()
   resumed = gtrain.train_gaussians(CFG, scene, out, None, show_progress=False)
   assert calls == list(range(60, STEPS))
   jax.tree_util.tree_map(np.testing.assert_array_equal, jax.device_get(full.state),
                          jax.device_get(resumed.state))
-  assert [r['step'] for r in rundir.read_jsonl(os.path.join(out, 'log.jsonl'))] == list(
+  assert [r['step'] for r in rundir.read_jsonl(rundir.log_path(out))] == list(
       range(1, STEPS + 1))
 
 
@@ -393,7 +393,7 @@ def test_pseudo_views_are_drawn_only_inside_the_window(scene, tmp_path):
   out = str(tmp_path / 'p')
   res = gtrain.train_gaussians(CFG, scene, out, pseudo, window=(10, 40),
                                show_progress=False)
-  recs = rundir.read_jsonl(os.path.join(out, 'log.jsonl'))
+  recs = rundir.read_jsonl(rundir.log_path(out))
   drawn = [r['step'] for r in recs if r['pseudo_rays'] > 0]
   assert drawn and all(11 <= s <= 40 for s in drawn)  # Steps 10..39 (step = done).
   assert {r['pseudo_rays'] for r in recs if r['pseudo_rays'] > 0} <= {768, 384}
@@ -458,33 +458,34 @@ def test_renerf_rounds_run_on_gaussians_and_resume(scene, tmp_path):
   """Config.backbone = 'gaussians' through the round driver and its run directory: B's
   renders become the pseudo-views, D draws them only before K, finished rounds load."""
   from flax import serialization  # pylint: disable=g-import-not-at-top
-  from renerf_jax import backbones, resume  # pylint: disable=g-import-not-at-top
+  from renerf_jax import backbones, round_driver  # pylint: disable=g-import-not-at-top
   cfg = dataclasses.replace(CFG, num_rounds=1, interp_factors='0.5',
                             lpips_nets=())  # LPIPS-alex needs 31 px a side.
   run_dir = str(tmp_path / 'run')
-  state = resume.run_rounds(cfg, scene, run_dir, show_progress=False)
+  state = round_driver.run_rounds(cfg, scene, run_dir, show_progress=False)
   assert [m['round'] for m in state.metrics] == [0, 1]
   assert all(np.isfinite(m['psnr']) and m['nan_skips'] == 0 for m in state.metrics)
   assert isinstance(state.params, params_lib.Gaussians)
   backbone = backbones.get_backbone(cfg)
-  with open(os.path.join(run_dir, 'round_0', 'params.msgpack'), 'rb') as f:
+  with open(rundir.params_path(rundir.round_dir(run_dir, 0)), 'rb') as f:
     b_params = serialization.from_bytes(backbone.init_params(cfg), f.read())
   assert state.pseudo.images.shape == (2, 24, 32, 3)  # 2 pairs x the factor 0.5
   np.testing.assert_array_equal(state.pseudo.masks, 1.)  # No masks on 3DGS.
   want = np.clip(backbone.render_views(cfg, scene, b_params, state.pseudo.poses)['rgb'],
                  0., 1.)
   np.testing.assert_allclose(state.pseudo.images, want, atol=1e-6)
-  log = rundir.read_jsonl(os.path.join(run_dir, 'round_1', 'train', 'log.jsonl'))
+  log = rundir.read_jsonl(rundir.round_log_path(run_dir, 1))
   k = int(round(cfg.pseudo_until_frac * cfg.max_steps))
   drawn = [r['step'] for r in log if r['pseudo_rays'] > 0]
   assert drawn and max(drawn) <= k  # Pseudo-views only in D's first K steps.
   assert log[-1]['pseudo_images'] == log[k - 1]['pseudo_images'] == len(drawn)
-  assert all(r['pseudo_rays'] == 0 for r in rundir.read_jsonl(
-      os.path.join(run_dir, 'round_0', 'train', 'log.jsonl')))
-  assert os.path.isfile(os.path.join(run_dir, 'round_1', 'eval', 'metrics.json'))
-  exported = ply.read_ply(os.path.join(run_dir, 'round_1', 'point_cloud.ply'))
+  assert all(r['pseudo_rays'] == 0
+             for r in rundir.read_jsonl(rundir.round_log_path(run_dir, 0)))
+  r1 = rundir.round_dir(run_dir, 1)
+  assert os.path.isfile(rundir.metrics_path(rundir.eval_dir(r1)))
+  exported = ply.read_ply(rundir.point_cloud_path(r1))
   active = np.asarray(state.params.active)
   np.testing.assert_array_equal(exported.means, np.asarray(state.params.means)[active])
-  again = resume.run_rounds(cfg, scene, run_dir, show_progress=False)
+  again = round_driver.run_rounds(cfg, scene, run_dir, show_progress=False)
   jax.tree_util.tree_map(np.testing.assert_array_equal, again.params, state.params)
   assert [m['psnr'] for m in again.metrics] == [m['psnr'] for m in state.metrics]

@@ -5,7 +5,7 @@ import jax
 import numpy as np
 import pytest
 
-from renerf_jax import backbones, pseudo_views, renerf, resume, rundir
+from renerf_jax import backbones, pseudo_views, renerf, round_driver, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.evaluation import Evaluation
 from renerf_jax.pseudo_views import pseudo_view_poses, uncertainty_heatmap
@@ -32,7 +32,7 @@ def test_round_step_is_pure_and_equals_the_persisted_round(tmp_path, monkeypatch
   state = renerf.run_rounds(config, scene)
   assert os.listdir(tmp_path) == []  # no file written anywhere relative to cwd
   assert state.round_index == 1 and [m['round'] for m in state.metrics] == [0, 1]
-  on_disk = resume.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
+  on_disk = round_driver.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
   jax.tree_util.tree_map(np.testing.assert_array_equal, state.params, on_disk.params)
   np.testing.assert_array_equal(state.pseudo.images, on_disk.pseudo.images)
   np.testing.assert_array_equal(state.pseudo.masks, on_disk.pseudo.masks)
@@ -105,27 +105,28 @@ def test_rounds_schedule_resume_and_masks(tmp_path):
                        deform_log2_res=2, hessian_rays=256, mask_keep_frac=0.7)
   scene = load_scene(config)
   run_dir = str(tmp_path / 'run')
-  state = resume.run_rounds(config, scene, run_dir, show_progress=False)
+  state = round_driver.run_rounds(config, scene, run_dir, show_progress=False)
   assert state.round_index == 1 and len(state.metrics) == 2
   assert state.metrics[1]['cumulative_seconds'] > state.metrics[0]['cumulative_seconds']
   # Pseudo rays are sampled before K = 10 and removed after.
-  log = rundir.read_jsonl(os.path.join(run_dir, 'round_1', 'train', 'log.jsonl'))
+  log = rundir.read_jsonl(rundir.round_log_path(run_dir, 1))
   assert [r['pseudo_rays'] > 0 for r in log] == [r['step'] <= 10 for r in log]
   assert all(r['pseudo_rays'] == 0 for r in
-             rundir.read_jsonl(os.path.join(run_dir, 'round_0', 'train', 'log.jsonl')))
+             rundir.read_jsonl(rundir.round_log_path(run_dir, 0)))
   # Masks keep ~70% of the pseudo pixels; they were stored with the pseudo-views.
   assert state.pseudo.masks.mean() == pytest.approx(0.7, abs=0.02)
   assert state.pseudo.uncertainty.max() > 0
   # Side-by-side PNG: view | uncertainty | masked view, masked pixels black in the third.
   import imageio.v3 as iio
-  panel = iio.imread(os.path.join(run_dir, 'round_1', 'pseudo_views', 'panel_000.png'))
+  panel = iio.imread(rundir.pseudo_view_png_path(
+      rundir.pseudo_views_dir(rundir.round_dir(run_dir, 1)), 'panel', 0))
   h, w = state.pseudo.images.shape[1:3]
   assert panel.shape[:2] == (h, 3 * w + 8)
   third = panel[:, 2 * w + 8:]
   assert np.all(third[state.pseudo.masks[0].reshape(h, w) == 0] == 0)
   # A rerun skips the finished rounds and rewrites nothing.
   before = tree_files(run_dir)
-  again = resume.run_rounds(config, scene, run_dir, show_progress=False)
+  again = round_driver.run_rounds(config, scene, run_dir, show_progress=False)
   assert tree_files(run_dir) == before
   assert again.metrics == state.metrics
   jax.tree_util.tree_map(np.testing.assert_array_equal, again.params, state.params)
@@ -135,7 +136,7 @@ def test_all_masked_pseudo_views_still_train_on_real_views(tmp_path):
   config = tiny_config(num_rounds=1, max_steps=10, pseudo_until_frac=1., use_masks=True,
                        deform_log2_res=1, hessian_rays=64, mask_threshold=0.)
   scene = load_scene(config)
-  state = resume.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
+  state = round_driver.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
   assert state.pseudo.masks.max() == 0.
   assert np.isfinite(state.metrics[1]['psnr']) and state.metrics[1]['nan_skips'] == 0
 
@@ -216,11 +217,12 @@ def test_the_round_driver_runs_any_backbone_through_its_interface(tmp_path, monk
   real = scene.images[scene.train_idx].reshape(-1, 3).mean(0, dtype=np.float64)
   np.testing.assert_allclose(state.params['colour'], real, rtol=1e-5)  # D = B here.
   calls.clear()
-  on_disk = resume.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
+  on_disk = round_driver.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
   assert [c[2] for c in calls] == [True] * 3  # Trained into the round directories.
   np.testing.assert_array_equal(on_disk.params['colour'], state.params['colour'])
-  assert os.path.isfile(tmp_path / 'run' / 'round_2' / 'eval' / 'test_000.png')  # the edge
-  again = resume.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
+  assert os.path.isfile(rundir.render_path(  # the edge
+      rundir.eval_dir(rundir.round_dir(str(tmp_path / 'run'), 2)), 'test_000'))
+  again = round_driver.run_rounds(config, scene, str(tmp_path / 'run'), show_progress=False)
   assert len(calls) == 3  # Finished rounds are loaded through init_params, not retrained.
   np.testing.assert_array_equal(again.params['colour'], state.params['colour'])
   assert [m['psnr'] for m in again.metrics] == [m['psnr'] for m in state.metrics]

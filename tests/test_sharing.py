@@ -8,10 +8,10 @@ import pytest
 
 from conftest import tiny_config, tree_files
 from experiments import sharing
-from renerf_jax import resume, rundir
+from renerf_jax import round_driver, rundir
 from renerf_jax.datasets import camera_rays, load_scene
-from renerf_jax.outputs import load_pseudo_views
 from renerf_jax.pseudo_views import pseudo_view_poses
+from renerf_jax.round_driver import load_pseudo_views
 
 
 def test_sharing_rules_derive_from_the_config_field_categories():
@@ -45,17 +45,17 @@ def test_copy_baseline_shares_round_0_between_variants_only(tmp_path):
   scene = load_scene(config)
   src, dst = str(tmp_path / 'src'), str(tmp_path / 'dst')
   cli.check_run_dir(config, src, create=True)
-  resume.run_rounds(config, scene, src, show_progress=False)
+  round_driver.run_rounds(config, scene, src, show_progress=False)
   # A variant that differs only from round 1 on reuses the baseline and trains round 1.
   variant = tiny_config(max_steps=10, num_rounds=1, pseudo_schedule='all',
                         pseudo_targets='test', use_masks=True)
   assert sharing.baseline_differences(variant, {}) != []  # vs defaults: differs
   sharing.copy_baseline(variant, src, dst)
-  before = tree_files(os.path.join(dst, 'round_0'))
-  assert before == tree_files(os.path.join(src, 'round_0'))
-  state = resume.run_rounds(variant, scene, dst, show_progress=False)
-  assert len(state.metrics) == 2 and tree_files(os.path.join(dst, 'round_0')) == before
-  assert rundir.is_done(os.path.join(dst, 'round_1'))
+  before = tree_files(rundir.round_dir(dst, 0))
+  assert before == tree_files(rundir.round_dir(src, 0))
+  state = round_driver.run_rounds(variant, scene, dst, show_progress=False)
+  assert len(state.metrics) == 2 and tree_files(rundir.round_dir(dst, 0)) == before
+  assert rundir.is_done(rundir.round_dir(dst, 1))
   # Another baseline config, an existing destination or an unfinished source: refused.
   with pytest.raises(RunDirError, match='lr_init'):
     sharing.copy_baseline(tiny_config(max_steps=10, lr_init=1e-2), src, str(tmp_path / 'x'))
@@ -72,19 +72,19 @@ def test_copy_baseline_shares_round_0_between_variants_only(tmp_path):
                              use_masks=True, hessian_lambda=1.)
   assert not sharing.share_pseudo_views(other_lambda, dst, dst2)
   assert not sharing.share_pseudo_views(variant, src, dst2)  # src has no round 1
-  assert not os.path.exists(os.path.join(dst2, 'round_1'))
+  assert not os.path.exists(rundir.round_dir(dst2, 1))
   early = tiny_config(max_steps=10, num_rounds=1, pseudo_schedule='early',
                       pseudo_targets='test', use_masks=True)
   assert sharing.share_pseudo_views(early, dst, dst2)
   assert not sharing.share_pseudo_views(early, dst, dst2)  # already there
-  pv = lambda d: tree_files(os.path.join(d, 'round_1', 'pseudo_views'))
+  pv = lambda d: tree_files(rundir.pseudo_views_dir(rundir.round_dir(d, 1)))
   copied = pv(dst2)
   assert 'copied_from.json' in copied
   assert {k: v for k, v in copied.items() if k != 'copied_from.json'} == pv(dst)
-  state = resume.run_rounds(early, scene, dst2, show_progress=False)
+  state = round_driver.run_rounds(early, scene, dst2, show_progress=False)
   assert pv(dst2) == copied  # used as they are, not rendered again
   np.testing.assert_array_equal(state.pseudo.masks, load_pseudo_views(
-      os.path.join(dst, 'round_1', 'pseudo_views')).masks)
+      rundir.pseudo_views_dir(rundir.round_dir(dst, 1))).masks)
 
 
 def test_overlapping_view_sets_render_each_view_once_with_identical_pixels(monkeypatch):
@@ -157,26 +157,26 @@ def test_finished_rounds_of_a_run_with_the_same_config_are_copied_not_retrained(
   src, dst = str(tmp_path / 'src'), str(tmp_path / 'dst')
   from renerf_jax import cli  # pylint: disable=g-import-not-at-top
   cli.check_run_dir(config, src, create=True)
-  resume.run_rounds(config, scene, src, show_progress=False)
+  round_driver.run_rounds(config, scene, src, show_progress=False)
   more = dataclasses.replace(config, num_rounds=2)  # the same run, one round further
   sharing.copy_baseline(more, src, dst)
   # Another D recipe, or another B: nothing is copied.
   assert sharing.copy_finished_rounds(dataclasses.replace(more, pseudo_schedule='all'),
                                      src, dst) == []
   other_b = str(tmp_path / 'other_b')
-  resume.run_rounds(dataclasses.replace(config, num_rounds=0, seed=4), scene, other_b,
-                    show_progress=False)
+  round_driver.run_rounds(dataclasses.replace(config, num_rounds=0, seed=4), scene, other_b,
+                          show_progress=False)
   assert sharing.copy_finished_rounds(more, src, other_b) == []
-  assert not os.path.exists(os.path.join(dst, 'round_1'))
+  assert not os.path.exists(rundir.round_dir(dst, 1))
   assert sharing.copy_finished_rounds(more, src, dst) == [1]  # round 2 is not in src
-  copied = tree_files(os.path.join(dst, 'round_1'))
+  copied = tree_files(rundir.round_dir(dst, 1))
   assert copied.pop('copied_from.json')
-  assert copied == tree_files(os.path.join(src, 'round_1'))
+  assert copied == tree_files(rundir.round_dir(src, 1))
   assert sharing.copy_finished_rounds(more, src, dst) == []  # already there
-  state = resume.run_rounds(more, scene, dst, show_progress=False)  # trains round 2 only
-  assert len(state.metrics) == 3 and rundir.is_done(os.path.join(dst, 'round_2'))
-  assert state.metrics[1] == resume.run_rounds(config, scene, src,
-                                               show_progress=False).metrics[1]
+  state = round_driver.run_rounds(more, scene, dst, show_progress=False)  # trains round 2 only
+  assert len(state.metrics) == 3 and rundir.is_done(rundir.round_dir(dst, 2))
+  assert state.metrics[1] == round_driver.run_rounds(config, scene, src,
+                                                     show_progress=False).metrics[1]
 
 
 def test_hessian_pass_is_shared_only_when_nothing_it_depends_on_differs(monkeypatch):

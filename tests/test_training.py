@@ -120,7 +120,8 @@ def test_train_model_resumes_from_a_mid_run_checkpoint(tmp_path, monkeypatch):
   monkeypatch.setattr(training, 'train_step', step)
   with pytest.raises(KeyboardInterrupt):
     training.train_model(config, scene, str(tmp_path / 'b'), pools, show_progress=False)
-  assert [s for s, _ in rundir.list_checkpoints(str(tmp_path / 'b' / 'checkpoints'))] == [10]
+  ckpts = rundir.list_checkpoints(rundir.checkpoints_dir(str(tmp_path / 'b')))
+  assert [s for s, _ in ckpts] == [10]
   # ... and run again: it restores step 10, trains steps 10..19 once more, and ends where
   # the uninterrupted run ended, bit for bit.
   calls.clear()

@@ -42,12 +42,12 @@ def _canvas_shot(page, path):
 def demo_run(tmp_path_factory):
   """B and R1 of a tiny model on the embedded scene, in a run directory (pseudo-views
   masked by the Laplace uncertainty)."""
-  from renerf_jax import cli, resume  # pylint: disable=g-import-not-at-top
+  from renerf_jax import cli, round_driver  # pylint: disable=g-import-not-at-top
   from renerf_jax.datasets import load_scene  # pylint: disable=g-import-not-at-top
   config = tiny_config(num_rounds=1, interp_factors='0.5', use_masks=True)
   run_dir = str(tmp_path_factory.mktemp('viewer') / 'run')
   cli.check_run_dir(config, run_dir, create=True)
-  resume.run_rounds(config, load_scene(config), run_dir, show_progress=False)
+  round_driver.run_rounds(config, load_scene(config), run_dir, show_progress=False)
   return run_dir
 
 
@@ -161,10 +161,10 @@ def _client_at(pose, fov=1., aspect=1., snapped=None):
 def test_psnr_at_test_cameras_equals_the_evaluation(viewer, demo_run):
   """At a test camera the viewer renders that camera's own image: its PSNR against the
   photo is the evaluation's, view by view."""
-  from renerf_jax import report  # pylint: disable=g-import-not-at-top
+  from renerf_jax import report, rundir  # pylint: disable=g-import-not-at-top
   viewer.gui_model.value, viewer.gui_layer.value = 'R1', 'error'
-  per_image = report.read_json(os.path.join(demo_run, 'round_1', 'eval',
-                                            'metrics.json'))['per_image']
+  per_image = report.read_json(rundir.metrics_path(rundir.eval_dir(
+      rundir.round_dir(demo_run, 1))))['per_image']
   scene = viewer.scene
   for rec, i in zip(per_image, scene.test_idx):
     cam = next(c for c in viewer._cameras() if c[0] == f'test {i}')
@@ -230,13 +230,14 @@ def test_follow_training_shows_the_newest_checkpoint(demo_run, tmp_path):
   from renerf_jax.viewer import Viewer, ViewerOptions  # pylint: disable=g-import-not-at-top
   run = str(tmp_path / 'run')
   shutil.copytree(demo_run, run)
-  for f in ('DONE', 'params.msgpack'):
-    os.remove(os.path.join(run, 'round_1', f))
+  done_r1, run_r1 = rundir.round_dir(demo_run, 1), rundir.round_dir(run, 1)
+  for path in (rundir.done_path, rundir.params_path):
+    os.remove(path(run_r1))
   config = run_contents.run_config(run)
   b_params, _ = run_contents.load_params(config, run, 0)
-  with open(os.path.join(demo_run, 'round_1', 'params.msgpack'), 'rb') as f:
+  with open(rundir.params_path(done_r1), 'rb') as f:
     r1_params = serialization.from_bytes(b_params, f.read())
-  ckpts = os.path.join(run, 'round_1', 'train', 'checkpoints')
+  ckpts = rundir.round_checkpoints_dir(run, 1)
   shutil.rmtree(ckpts)
   meta = {'train_seconds': np.zeros((), np.float64)}
   rundir.save_checkpoint(ckpts, {'state': {'step': 10, 'params': b_params}, 'meta': meta}, 10)
@@ -256,9 +257,8 @@ def test_follow_training_shows_the_newest_checkpoint(demo_run, tmp_path):
     same = jax.tree_util.tree_map(np.array_equal, params, r1_params)
     assert all(jax.tree_util.tree_leaves(same))
     # The round finishes: its final params replace the checkpoint's.
-    shutil.copy(os.path.join(demo_run, 'round_1', 'params.msgpack'),
-                os.path.join(run, 'round_1', 'params.msgpack'))
-    shutil.copy(os.path.join(demo_run, 'round_1', 'DONE'), os.path.join(run, 'round_1', 'DONE'))
+    for path in (rundir.params_path, rundir.done_path):
+      shutil.copy(path(done_r1), path(run_r1))
     assert v.refresh() and v.rounds[-1].done and v.params(1)[1] is None
   finally:
     v.stop()
