@@ -14,7 +14,6 @@ import numpy as np
 
 from benchmarks.browser import launch
 from benchmarks.ports import free_port
-from renerf_jax import view_cameras as vc
 
 
 def main():

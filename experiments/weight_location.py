@@ -13,7 +13,6 @@ A run whose test PSNR is low because of floaters shows weight where no surface i
 import argparse
 import dataclasses
 import functools
-import os
 
 import jax
 import jax.numpy as jnp
