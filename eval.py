@@ -9,7 +9,7 @@ table, writes eval_rounds.json/.md and plots error_vs_time.png in the run direct
 import os
 import sys
 
-from renerf_jax import cli, distributed, report, rundir
+from renerf_jax import cli, distributed, figures, report, rundir
 from renerf_jax.backbones import get_backbone
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import initial_state, round_config, rounds_table
@@ -84,7 +84,7 @@ def main(argv=None):
     for c in curve:
       label = 'baseline' if c['round'] == 0 else f"round {c['round']}"
       curves.setdefault(label, []).append((c['time'], c['eval_psnr']))
-    report.plot_error_vs_time(curves, rundir.error_vs_time_path(run_dir),
+    figures.plot_error_vs_time(curves, rundir.error_vs_time_path(run_dir),
                               metric='psnr', title=f'{scene.name}: test PSNR vs time')
   print(table)
   print('\nError against run time (cheap test PSNR):\n' + curve_md)

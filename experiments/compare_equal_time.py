@@ -39,7 +39,7 @@ import jax
 import numpy as np
 
 from experiments import tables
-from renerf_jax import jit_cache, report, rundir, training
+from renerf_jax import figures, jit_cache, report, rundir, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import make_pools
@@ -197,7 +197,7 @@ def main():
           f'base `{args.base}`.\n\n' + report.markdown_table(rows, cols) + note
           + f'\n\nCommand:\n\n    {cmd}\n')
   report.write_markdown(os.path.join(args.out, args.name + '.md'), text)
-  report.plot_error_vs_time(curves, os.path.join(args.out, args.name + '_curves.png'),
+  figures.plot_error_vs_time(curves, os.path.join(args.out, args.name + '_curves.png'),
                             metric='psnr', title=f'{args.name}: test PSNR vs training time')
   print(text)
 

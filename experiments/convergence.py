@@ -25,7 +25,7 @@ import os
 import sys
 
 from experiments.tables import command_line, mean_std
-from renerf_jax import cli, jit_cache, report, round_driver, rundir
+from renerf_jax import cli, figures, jit_cache, report, round_driver, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.progress import progress_bar
@@ -108,7 +108,7 @@ def markdown(rows, command):
 
 
 def plot(rows, scenes, path):
-  fig, axes = report.subplots(len(METRICS), 2, figsize=(10, 2.6 * len(METRICS)))
+  fig, axes = figures.subplots(len(METRICS), 2, figsize=(10, 2.6 * len(METRICS)))
   for scene in scenes:
     rs = [r for r in rows if r['scene'] == scene]
     if not rs:
@@ -124,7 +124,7 @@ def plot(rows, scenes, path):
   axes[0, 0].legend()
   fig.suptitle('baseline B at N steps (decayed lr): test metrics, mean +- std over seeds')
   fig.tight_layout()
-  report.save_figure(fig, path, dpi=100)
+  figures.save_figure(fig, path, dpi=100)
 
 
 def main(argv=None):

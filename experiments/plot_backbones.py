@@ -20,7 +20,7 @@ import os
 import numpy as np
 
 from experiments import tables
-from renerf_jax import report, rundir
+from renerf_jax import figures, report, rundir
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 
@@ -91,7 +91,7 @@ def main(argv=None):
           f'training against time ({time_note}).\n\n{table}\n\nCommand:\n\n'
           f'    {results["command"]}\n')
   report.write_markdown(base + '.md', text)
-  report.plot_error_vs_time(curves, base + '.png', metric='psnr',
+  figures.plot_error_vs_time(curves, base + '.png', metric='psnr',
                             title=f'{args.name}: test PSNR (strided) vs seconds')
   print(text)
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from experiments.tables import bindings_of
 from renerf_jax import poses as pose_lib
-from renerf_jax import report, round_driver, rundir
+from renerf_jax import figures, round_driver, rundir
 from renerf_jax.backbones import get_backbone
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import downsample_scene, load_scene
@@ -78,12 +78,12 @@ def main():
   videos = [np.clip(render_views(config, small, prm, path, show_progress=True)['rgb'],
                     0., 1.) for prm in params]
   gap = np.ones((small.height, 4, 3), np.float32)
-  frames = [report.to_uint8(np.concatenate([a, gap, b], 1)) for a, b in zip(*videos)]
+  frames = [figures.to_uint8(np.concatenate([a, gap, b], 1)) for a, b in zip(*videos)]
   os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
   tmp = args.out + '.tmp.gif'
   iio.imwrite(tmp, np.stack(frames), duration=1000. / args.fps, loop=0)
   os.replace(tmp, args.out)
-  report.save_image_png(os.path.splitext(args.out)[0] + '_frame.png',
+  figures.save_image_png(os.path.splitext(args.out)[0] + '_frame.png',
                         frames[len(frames) // 4])
   print(f'wrote {args.out}: {len(frames)} frames, rounds {rounds[0]} | {rounds[1]}')
 

@@ -51,7 +51,7 @@ import shlex
 import numpy as np
 
 from experiments import paired, tables
-from renerf_jax import jit_cache, renerf, report, rundir
+from renerf_jax import figures, jit_cache, renerf, report, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 
@@ -393,7 +393,7 @@ def markdown(summary, scenes, command, sources=(), backbone='nerf'):
 
 def plot(summary, scenes, path):
   labels = [lb for lb in summary['mean']]
-  fig, axes = report.subplots(1, len(METRICS), figsize=(5 * len(METRICS), 3.6))
+  fig, axes = figures.subplots(1, len(METRICS), figsize=(5 * len(METRICS), 3.6))
   axes = axes[0]
   width = 0.8 / max(len(labels), 1)
   for ax, k in zip(axes, METRICS):
@@ -415,7 +415,7 @@ def plot(summary, scenes, path):
     ax.set_title(f'{k}: D - B (paired by seed)')
   axes[0].legend(fontsize=7)
   fig.tight_layout()
-  report.save_figure(fig, path, dpi=100)
+  figures.save_figure(fig, path, dpi=100)
 
 
 def main(argv=None):

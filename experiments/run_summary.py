@@ -19,7 +19,7 @@ import imageio.v3 as iio
 import numpy as np
 
 from experiments import tables
-from renerf_jax import report, rundir
+from renerf_jax import figures, report, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.evaluation import view_name
@@ -82,7 +82,7 @@ def main():
   table += ('\nPSNR, SSIM, LPIPS: every test view at the end. Best test PSNR: the '
             'training curve\'s evaluations (every Config.eval_stride-th pixel).\n')
   report.write_markdown(args.out + '.md', table + f'\n\nCommand:\n\n    {cmd}\n')
-  fig, axes = report.subplots(1, 1, (6, 4))
+  fig, axes = figures.subplots(1, 1, (6, 4))
   ax = axes[0, 0]
   for name, curve in curves.items():
     if curve:
@@ -90,12 +90,12 @@ def main():
   ax.set_xlabel('training time [s]')
   ax.set_ylabel('test PSNR [dB] (curve evaluations)')
   ax.legend()
-  report.save_figure(fig, args.out + '.png')
+  figures.save_figure(fig, args.out + '.png')
   strips = [photo_and_render(run, args.data_dir)[::2, ::2] for run in args.runs]
   width = max(s.shape[1] for s in strips)
   strips = [np.pad(s, ((0, 4), (0, width - s.shape[1]), (0, 0)), constant_values=1.)
             for s in strips]
-  report.save_image_png(args.out + '_renders.png', np.concatenate(strips, axis=0))
+  figures.save_image_png(args.out + '_renders.png', np.concatenate(strips, axis=0))
   print(table)
 
 

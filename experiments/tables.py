@@ -38,7 +38,7 @@ import sys
 import numpy as np
 
 from experiments import sharing
-from renerf_jax import cli, jit_cache, report, round_driver, rundir
+from renerf_jax import cli, figures, jit_cache, report, round_driver, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 
@@ -349,10 +349,10 @@ def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
         f'from there, with their times).' for label, srcs in copied_rounds.items())
   text = markdown(args, rows, paper or {}, shared_rows, paper_note, results['command'])
   report.write_markdown(os.path.join(args.out, args.name + '.md'), text)
-  report.plot_error_vs_time(curves, os.path.join(args.out, args.name + '_time.png'),
+  figures.plot_error_vs_time(curves, os.path.join(args.out, args.name + '_time.png'),
                             metric='psnr',
                             title=f'{args.name}: test PSNR vs cumulative seconds')
-  report.plot_metrics_vs_time(
+  figures.plot_metrics_vs_time(
       metric_curves(summaries), os.path.join(args.out, args.name + '_metrics_time.png'),
       title=f'{args.name}: full test metrics after each round vs cumulative seconds '
             f'(mean +- std over seeds {args.seeds})')

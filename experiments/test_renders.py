@@ -17,7 +17,7 @@ import os
 import imageio.v3 as iio
 import numpy as np
 
-from renerf_jax import report, rundir
+from renerf_jax import figures, report, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.evaluation import view_name
@@ -51,7 +51,7 @@ def main(argv=None):
                  help='which test view (0: the first of the split)')
   p.add_argument('--out', required=True, help='output .png')
   args = p.parse_args(argv)
-  fig, axes = report.subplots(len(args.scenes), 1 + len(COLUMNS),
+  fig, axes = figures.subplots(len(args.scenes), 1 + len(COLUMNS),
                               figsize=(3.2 * (1 + len(COLUMNS)), 2.6 * len(args.scenes)))
   for row, sc in enumerate(args.scenes):
     scene = load_scene(load_config(args.config, args.gin_bindings + [
@@ -73,7 +73,7 @@ def main(argv=None):
       ax.set_title(f'{sc}: {title}' + (f' ({psnr:.2f} dB)' if psnr is not None else ''),
                    fontsize=9)
   fig.tight_layout()
-  report.save_figure(fig, args.out, dpi=110)
+  figures.save_figure(fig, args.out, dpi=110)
   print(f'wrote {args.out}')
 
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from experiments import tables
 from experiments.render_video import load_params, run_config, run_parser
-from renerf_jax import report, round_driver, rundir
+from renerf_jax import figures, report, round_driver, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.pseudo_views import side_by_side, uncertainty_heatmap
 
@@ -53,7 +53,7 @@ def main(argv=None):
                        pv.masks[v]) for v in args.views]
   gap = np.ones((4,) + rows[0].shape[1:], np.float32)
   panel = np.concatenate([x for r in rows for x in (r, gap)][:-1], axis=0)
-  report.save_image_png(args.out + '.png', panel)
+  figures.save_image_png(args.out + '.png', panel)
   out = dict(timing, views=args.views, run_dir=args.run_dir, round=args.round,
              hessian_rays=config.hessian_rays, deform_log2_res=config.deform_log2_res,
              command=tables.command_line('experiments.uncertainty_panel'))

@@ -31,7 +31,7 @@ import time
 import numpy as np
 
 from experiments.tables import command_line, mean_std
-from renerf_jax import cli, contraction, jit_cache, report, round_driver, rundir
+from renerf_jax import cli, contraction, figures, jit_cache, report, round_driver, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import camera_rays, load_scene, ray_pool
 from renerf_jax.progress import progress_bar
@@ -232,7 +232,7 @@ def plot_curves(runs, scene, path):
   rs = [r for r in runs if r['scene'] == scene]
   kinds = [('', 'RGB squared error')] + (
       [('depth_', '|depth error|')] if 'depth_curve' in rs[0]['variants']['laplace'] else [])
-  fig, axes = report.subplots(1, len(kinds), figsize=(6 * len(kinds), 4.2))
+  fig, axes = figures.subplots(1, len(kinds), figsize=(6 * len(kinds), 4.2))
   x = uq.DEFAULT_FRACTIONS
   for ax, (p, title) in zip(axes[0], kinds):
     for v in us.VARIANTS:
@@ -247,7 +247,7 @@ def plot_curves(runs, scene, path):
     ax.set_title(f'{scene}: {title}, {len(rs)} seed(s); legend: AUSE')
     ax.legend(fontsize=7)
   fig.tight_layout()
-  report.save_figure(fig, path, dpi=100)
+  figures.save_figure(fig, path, dpi=100)
 
 
 def plot_panel(npz_path, variants, keep_frac, path):
@@ -266,13 +266,13 @@ def plot_panel(npz_path, variants, keep_frac, path):
                            np.ones(u.shape)))
   rows[-1][:, -u.shape[1]:] = uncertainty_heatmap(a['err'][0])
   titles.append(f'test view (B) | U = {variants[0]} | RGB error (quantiles)')
-  fig, axes = report.subplots(len(rows), 1, figsize=(9, 2.6 * len(rows)))
+  fig, axes = figures.subplots(len(rows), 1, figsize=(9, 2.6 * len(rows)))
   for ax, img, t in zip(axes[:, 0], rows, titles):
     ax.imshow(np.clip(img, 0., 1.), interpolation='nearest')
     ax.set_title(t, fontsize=9)
     ax.axis('off')
   fig.tight_layout()
-  report.save_figure(fig, path, dpi=100)
+  figures.save_figure(fig, path, dpi=100)
 
 
 def main(argv=None):

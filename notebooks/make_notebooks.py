@@ -20,7 +20,7 @@ import numpy as np
 import matplotlib.pyplot as plt
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax import renerf, report, round_driver, rundir
+from renerf_jax import figures, renerf, report, round_driver, rundir
 
 SMALL = os.environ.get('RENERF_NOTEBOOK_SMALL') == '1'
 repo = os.path.abspath('..')
@@ -46,7 +46,7 @@ n = min(4, pv.images.shape[0])
 plt.figure(figsize=(3 * n, 7))
 for j in range(n):
   plt.subplot(3, n, j + 1); plt.imshow(pv.images[j]); plt.axis('off')
-  plt.subplot(3, n, n + j + 1); plt.imshow(report.colorize(pv.uncertainty[j])); plt.axis('off')
+  plt.subplot(3, n, n + j + 1); plt.imshow(figures.colorize(pv.uncertainty[j])); plt.axis('off')
   plt.subplot(3, n, 2 * n + j + 1); plt.imshow(pv.masks[j], cmap='gray', vmin=0, vmax=1); plt.axis('off')
 plt.suptitle('pseudo-views (top), uncertainty (middle), masks (bottom)'); plt.show()
 print('kept fraction of pseudo pixels:', float(np.mean(pv.masks)))'''),

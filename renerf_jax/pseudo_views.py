@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from renerf_jax import poses as pose_lib
-from renerf_jax import random_poses, report
+from renerf_jax import figures, random_poses
 from renerf_jax.datasets import camera_rays
 from renerf_jax.errors import ConfigError
 from renerf_jax.progress import progress_bar
@@ -199,7 +199,7 @@ def uncertainty_heatmap(u, ref=None):
   ok = np.isfinite(u)
   if ref.size:
     q[ok] = np.searchsorted(ref, u[ok], side='right') / ref.size
-  return report.colorize(q, lo=0., hi=1.)
+  return figures.colorize(q, lo=0., hi=1.)
 
 
 def side_by_side(image, heat, mask):

@@ -20,7 +20,7 @@ from typing import Callable, Optional
 import numpy as np
 from flax import serialization
 
-from renerf_jax import backbones, distributed, pseudo_views, renerf, report, rundir
+from renerf_jax import backbones, distributed, figures, pseudo_views, renerf, report, rundir
 from renerf_jax.evaluation import Evaluation
 from renerf_jax.pseudo_views import PseudoViews
 
@@ -37,9 +37,9 @@ def save_evaluation(out_dir, ev: Evaluation, save_png=True):
   os.makedirs(out_dir, exist_ok=True)
   if save_png:
     for m, image, distance in zip(ev.per_image, ev.images, ev.distances):
-      report.save_image_png(rundir.render_path(out_dir, m['name']), image)
-      report.save_image_png(rundir.depth_render_path(out_dir, m['name']),
-                            report.colorize(distance))
+      figures.save_image_png(rundir.render_path(out_dir, m['name']), image)
+      figures.save_image_png(rundir.depth_render_path(out_dir, m['name']),
+                            figures.colorize(distance))
   report.write_json(rundir.metrics_path(out_dir), ev.summary())
   report.write_markdown(rundir.metrics_md_path(out_dir), report.markdown_table(
       report.per_image_table(ev.per_image), list(ev.columns)) + '\n')
@@ -61,13 +61,13 @@ def save_pseudo_views(directory, pv: PseudoViews, meta, save_png=True):
   if save_png:
     png = lambda kind, i: rundir.pseudo_view_png_path(directory, kind, i)
     for i in range(arrays['images'].shape[0]):
-      report.save_image_png(png('view', i), arrays['images'][i])
-      report.save_image_png(png('mask', i), arrays['masks'][i])
+      figures.save_image_png(png('view', i), arrays['images'][i])
+      figures.save_image_png(png('mask', i), arrays['masks'][i])
       if np.any(arrays['uncertainty'][i]):
         heat = pseudo_views.uncertainty_heatmap(arrays['uncertainty'][i],
                                                 arrays['uncertainty'])
-        report.save_image_png(png('uncertainty', i), heat)
-        report.save_image_png(png('panel', i),
+        figures.save_image_png(png('uncertainty', i), heat)
+        figures.save_image_png(png('panel', i),
                               pseudo_views.side_by_side(arrays['images'][i], heat,
                                                         arrays['masks'][i]))
 

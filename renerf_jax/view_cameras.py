@@ -9,7 +9,7 @@ import dataclasses
 
 import numpy as np
 
-from renerf_jax import quaternions, report
+from renerf_jax import figures, quaternions
 from renerf_jax.datasets.scene import Scene
 
 _GL_TO_CV = np.diag([1., -1., -1.])  # Flips the y and z camera axes (either way round).
@@ -126,16 +126,16 @@ def layer_image(layer: str, out, photo=None, depth_range=None) -> np.ndarray:
       fin = d[np.isfinite(d)]
       depth_range = ((float(np.quantile(fin, .02)), float(np.quantile(fin, .98)))
                      if fin.size else (0., 1.))
-    return report.colorize(d, lo=depth_range[0], hi=depth_range[1])
+    return figures.colorize(d, lo=depth_range[0], hi=depth_range[1])
   if layer == 'acc':
     return np.repeat(np.clip(np.asarray(out['acc'], np.float32), 0., 1.)[..., None], 3, -1)
   if layer == 'uncertainty':
-    return report.colorize(1. - np.asarray(out['acc'], np.float64), lo=0., hi=1.)
+    return figures.colorize(1. - np.asarray(out['acc'], np.float64), lo=0., hi=1.)
   if layer == 'error':
     if photo is None:
       raise ValueError("layer 'error' needs the photo at the view's camera")
     err = np.mean(np.abs(rgb - np.asarray(photo, np.float32)[..., :3]), axis=-1)
-    return report.colorize(err, lo=0., hi=.25)
+    return figures.colorize(err, lo=0., hi=.25)
   raise ValueError(f'unknown layer {layer!r} ({", ".join(LAYERS)})')
 
 

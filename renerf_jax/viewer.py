@@ -30,7 +30,7 @@ from typing import Optional
 
 import numpy as np
 
-from renerf_jax import report, run_contents
+from renerf_jax import figures, run_contents
 from renerf_jax import view_cameras as vc
 from renerf_jax.backbones import get_backbone
 from renerf_jax.pseudo_views import uncertainty_heatmap
@@ -146,7 +146,7 @@ class Viewer(FrameRenderer):
       h = self.server.scene.add_camera_frustum(
           f'/cameras/{name.replace(" ", "_")}', fov=fov, aspect=aspect, scale=self.scale,
           thickness=1.5, thickness_units='screen', color=colours[kind],
-          image=None if image is None else report.to_uint8(image), wxyz=wxyz, position=pos)
+          image=None if image is None else figures.to_uint8(image), wxyz=wxyz, position=pos)
       h.on_click(lambda event, name=name: self.snap(event.client, name))
       self._frustums.append(h)
     if hasattr(self, 'gui_camera'):

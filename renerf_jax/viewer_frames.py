@@ -11,7 +11,7 @@ from typing import Optional
 
 import numpy as np
 
-from renerf_jax import report, run_contents
+from renerf_jax import figures, run_contents
 from renerf_jax import view_cameras as vc
 from renerf_jax.metrics import mse_to_psnr
 
@@ -160,7 +160,7 @@ class FrameRenderer:
     dt = time.perf_counter() - t0
     if img is None:
       return done_full_for
-    picture = report.to_uint8(img)
+    picture = figures.to_uint8(img)
     st.client.scene.set_background_image(picture, format='jpeg',
                                          jpeg_quality=self.opts.jpeg_quality)
     s = self.stats

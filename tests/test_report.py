@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from renerf_jax import report
+from renerf_jax import figures, report
 
 
 def _leftovers(directory):
@@ -121,13 +121,13 @@ def test_plots_are_valid_pngs(tmp_path):
       'baseline': [(5., 11.), (50., 18.)],
   }
   path = tmp_path / 'psnr_vs_time.png'
-  report.plot_error_vs_time(curves, path, metric='psnr')
+  figures.plot_error_vs_time(curves, path, metric='psnr')
   assert path.stat().st_size > 0
   img = iio.imread(path)
   assert img.ndim == 3 and img.shape[0] > 50 and img.shape[1] > 50
   assert img.std() > 0  # not a blank canvas
   path2 = tmp_path / 'metrics.png'
-  report.plot_metrics_vs_time(
+  figures.plot_metrics_vs_time(
       {'psnr': curves, 'ssim': {'ours': [(1., .5, .02), (2., .6, .03)]},  # error bars
        'lpips': {'ours': [(1., .4), (2., .3)]}}, path2, title='run')
   img2 = iio.imread(path2)
@@ -138,12 +138,12 @@ def test_plots_are_valid_pngs(tmp_path):
 def test_save_image_png_round_trip(tmp_path):
   img = np.linspace(0., 1., 8 * 6 * 3).reshape(8, 6, 3)
   path = tmp_path / 'img.png'
-  report.save_image_png(path, img)
+  figures.save_image_png(path, img)
   back = iio.imread(path)
   assert back.dtype == np.uint8 and back.shape == (8, 6, 3)
   np.testing.assert_array_equal(back, np.round(img * 255).astype(np.uint8))
   gray = tmp_path / 'gray.png'
-  report.save_image_png(gray, np.array([[np.nan, 2.], [-1., 0.5]]))
+  figures.save_image_png(gray, np.array([[np.nan, 2.], [-1., 0.5]]))
   np.testing.assert_array_equal(iio.imread(gray), [[0, 255], [0, 128]])
   assert _leftovers(tmp_path) == []
 
@@ -155,20 +155,20 @@ def test_save_image_png_round_trip(tmp_path):
     np.arange(12.).reshape(3, 4),
 ])
 def test_colorize_is_finite_and_in_range(x):
-  rgb = report.colorize(x)
+  rgb = figures.colorize(x)
   assert rgb.shape == x.shape + (3,)
   assert np.all(np.isfinite(rgb))
   assert rgb.min() >= 0. and rgb.max() <= 1.
-  as_u8 = report.to_uint8(rgb)
+  as_u8 = figures.to_uint8(rgb)
   assert as_u8.dtype == np.uint8
 
 
 def test_colorize_ordering_and_invalid_color():
   x = np.array([[0., 1.], [2., np.nan]])
-  rgb = report.colorize(x, cmap='gray')
+  rgb = figures.colorize(x, cmap='gray')
   assert rgb[0, 0].sum() < rgb[0, 1].sum() < rgb[1, 0].sum()
   np.testing.assert_allclose(rgb[1, 1], 0.)
   # Explicit range clips values outside [lo, hi].
-  clipped = report.colorize(x, lo=0.5, hi=1., cmap='gray')
+  clipped = figures.colorize(x, lo=0.5, hi=1., cmap='gray')
   np.testing.assert_allclose(clipped[0, 0], 0., atol=1e-6)
   np.testing.assert_allclose(clipped[1, 0], 1., atol=1e-6)

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from renerf_jax import quaternions, report
+from renerf_jax import figures, quaternions
 from renerf_jax import view_cameras as vc
 from renerf_jax.cameras import pixel_directions
 
@@ -139,4 +139,4 @@ def test_masked_view_tints_only_masked_pixels():
   out = vc.masked_view(img, mask)
   np.testing.assert_allclose(out[0, 0], .5)
   assert not np.allclose(out[0, 1], .5)
-  assert report.to_uint8(np.array([[[np.nan, 2., -1.]]])).tolist() == [[[0, 255, 0]]]
+  assert figures.to_uint8(np.array([[[np.nan, 2., -1.]]])).tolist() == [[[0, 255, 0]]]
