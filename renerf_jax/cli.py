@@ -7,7 +7,7 @@ import sys
 import traceback
 from typing import Optional, Sequence
 
-from renerf_jax import distributed, jit_cache, report, rundir
+from renerf_jax import distributed, jit_cache, process_supervisor, report, rundir
 from renerf_jax.configs import config_differences, config_to_gin, fields_where, load_config
 from renerf_jax.errors import USER_ERRORS, RunDirError
 
@@ -63,21 +63,21 @@ def exit_on_error(fn):
       return fn(*args, **kwargs)
     except USER_ERRORS as e:
       if distributed.is_multi():
-        distributed.fail_fast(f'error: {e}', 2)
+        process_supervisor.fail_fast(f'error: {e}', 2)
       print(f'error: {e}', file=sys.stderr)
       sys.exit(2)
     except Exception as e:  # pylint: disable=broad-except
       if not distributed.is_multi():
         raise
-      if distributed.is_peer_failure(e):
-        distributed.fail_fast(distributed.peer_failure_line(distributed.first_line(e)), 2)
+      if process_supervisor.is_peer_failure(e):
+        process_supervisor.fail_fast(distributed.peer_failure_line(process_supervisor.first_line(e)), 2)
       traceback.print_exc()
-      distributed.fail_fast(f'error: {distributed.describe()} failed: '
-                            f'{distributed.first_line(e)}', 1)
+      process_supervisor.fail_fast(f'error: {distributed.describe()} failed: '
+                            f'{process_supervisor.first_line(e)}', 1)
     except KeyboardInterrupt:
       if not distributed.is_multi():
         raise
-      distributed.fail_fast(f'error: {distributed.describe()} interrupted', 130)
+      process_supervisor.fail_fast(f'error: {distributed.describe()} interrupted', 130)
   return wrapped
 
 

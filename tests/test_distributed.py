@@ -32,7 +32,7 @@ from conftest import REPO
 from flax import serialization
 from test_crash_resume import _KILL_AT  # The same kill points as the crash test.
 
-from renerf_jax import distributed
+from renerf_jax import distributed, process_supervisor
 from renerf_jax.errors import DistributedError
 
 BINDINGS = [
@@ -161,7 +161,7 @@ def test_shares_cover_every_item_once():
 
 def test_stderr_filter_turns_jax_fatal_stop_into_nothing_but_held_lines():
   out = []
-  f = distributed.StderrFilter(out.append)
+  f = process_supervisor.StderrFilter(out.append)
   f.feed(b'[Gloo] Rank 1 is connected\nround 1:  10%|#  | 2/20\r')
   f.feed(b'round 1:  15%|#  | 3/20\r')
   f.feed(b'E1204 16:36:11.986057   15746 coordination_service_agent.cc:289] Polled an '
@@ -176,17 +176,17 @@ def test_stderr_filter_turns_jax_fatal_stop_into_nothing_but_held_lines():
                    'round 1:  15%|#  | 3/20\rerror: process 1 of 2 stopped: x\n')
   assert f.fatal.startswith('Terminating process') and f.error_lines == 2
   assert len(f.held) == 5
-  assert distributed.fatal_reason(f.fatal) == (
+  assert process_supervisor.fatal_reason(f.fatal) == (
       'UNAVAILABLE: Failed to send RPC to coordination service')
 
 
 def test_peer_failures_are_told_from_other_errors():
   gloo = ValueError('UNKNOWN: Gloo AllGather failed: [external/gloo/gloo/transport/tcp/'
                     'pair.cc:538] Read error [127.0.0.1]:31122: Connection reset by peer')
-  assert distributed.is_peer_failure(gloo)
-  assert not distributed.is_peer_failure(ValueError('Config.batch_size is unavailable'))
-  assert not distributed.is_peer_failure(KeyError('gloo'))
-  assert distributed.first_line(ValueError('a\nb')) == 'a'
+  assert process_supervisor.is_peer_failure(gloo)
+  assert not process_supervisor.is_peer_failure(ValueError('Config.batch_size is unavailable'))
+  assert not process_supervisor.is_peer_failure(KeyError('gloo'))
+  assert process_supervisor.first_line(ValueError('a\nb')) == 'a'
 
 
 def test_bench_counts_the_bytes_of_every_all_reduce():
