@@ -6,7 +6,7 @@ log, through rundir, when given a directory) and `export` write files, the rest 
 arrays that round_driver.py writes:
 
   init_params(config)                        -> a parameter template (loading a round)
-  train(config, scene, out_dir, pseudo, ...) -> training.TrainResult, trained from scratch
+  train(config, scene, out_dir, pseudo, ...) -> fit.TrainResult, trained from scratch
       on the real training views plus the pseudo-views (drawn inside the step window)
   synthesize(config, scene, params, ...)     -> (PseudoViews, timing, meta)
   cheap_eval_fn(config, scene)               -> params -> test PSNR (training curves)

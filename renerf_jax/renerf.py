@@ -21,7 +21,7 @@ import flax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import contraction, pseudo_views, random_poses, report, training
+from renerf_jax import contraction, fit, pseudo_views, random_poses, report, training
 from renerf_jax.datasets import camera_rays, ray_pool
 from renerf_jax.errors import ConfigError
 from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses, render_pseudo_views
@@ -168,7 +168,7 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
     show_progress: draw progress bars.
     synthesize_fn: (config, scene, params, show_progress) -> (PseudoViews, timing, meta).
     train_fn: (config, scene, pseudo: PseudoViews or None, **kwargs) ->
-      training.TrainResult (kwargs: window, init_params, eval_fn, time_offset, desc,
+      fit.TrainResult (kwargs: window, init_params, eval_fn, time_offset, desc,
       show_progress, as training.train_model takes them).
     evaluate_fn: (config, scene, params) -> evaluation.Evaluation.
     round_driver.py binds them to a round directory.
@@ -192,7 +192,7 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
   start = state.seconds + synth_seconds
   result = train_fn(
       cfg, scene, pseudo,
-      window=training.pseudo_window(cfg) if pseudo is not None else (0, 0),
+      window=fit.pseudo_window(cfg) if pseudo is not None else (0, 0),
       init_params=state.params if r > 0 and config.renerf_init == 'continue' else None,
       eval_fn=backbone.cheap_eval_fn(cfg, scene), time_offset=start,
       desc=f'round {r}' if r else 'baseline', show_progress=show_progress)

@@ -1,4 +1,4 @@
-"""Training one model: TrainState, RegNeRF's lr schedule, the jitted step, the loop.
+"""Training one NeRF: TrainState, RegNeRF's lr schedule, the jitted step; fit.fit loops.
 
 The step is a pure function `train_step(config, cam, pseudo_on, state, pools, key)`
 jitted with (config, cam, pseudo_on) static: regularisers a config switches off, and the
@@ -15,12 +15,10 @@ import numpy as np
 import optax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from renerf_jax import cameras, distributed, metrics, regularizers, rundir
-from renerf_jax.config_checks import pseudo_steps
+from renerf_jax import cameras, distributed, fit, metrics, regularizers
 from renerf_jax.fields import frequency_mask, init_field_params
 from renerf_jax.fields.proposal import interlevel_loss
 from renerf_jax.model import colour_levels, render_rays
-from renerf_jax.progress import progress_bar
 
 
 @flax.struct.dataclass
@@ -85,18 +83,6 @@ def make_optimizer(config):
   parts.append(optax.adam(functools.partial(learning_rate, config=config),
                           eps=config.adam_eps))
   return optax.chain(*parts)
-
-
-def init_and_step_keys(config):
-  """(key of the parameters' initialisation, base key of the per-step draws).
-
-  Both are split from PRNGKey(Config.seed); with Config.init_seed >= 0 the initialisation
-  key is split from PRNGKey(init_seed) instead (init_seed == seed gives the same keys).
-  """
-  k_init, base_key = jax.random.split(jax.random.PRNGKey(config.seed))
-  if config.init_seed >= 0:
-    k_init = jax.random.split(jax.random.PRNGKey(config.init_seed))[0]
-  return k_init, base_key
 
 
 def init_state(config, key, params=None) -> TrainState:
@@ -330,24 +316,23 @@ def train_step(config, cam: Camera, pseudo_on: bool, state: TrainState, pools, k
                     nan_skips=state.nan_skips + jnp.where(finite, 0, 1)), stats
 
 
-@dataclasses.dataclass
-class TrainResult:
-  state: TrainState
-  train_seconds: float  # Wall time spent in optimisation (evaluation excluded).
-  curve: list  # [{'step', 'train_seconds', 'eval_psnr'}] cheap test evaluations.
-
-
-def pseudo_window(config):
-  """[start, end) steps in which pseudo-view rays are sampled (Config.pseudo_schedule)."""
-  k = min(pseudo_steps(config), config.max_steps)
-  return {'early': (0, k), 'all': (0, config.max_steps),
-          'late': (config.max_steps - k, config.max_steps)}[config.pseudo_schedule]
+def _log_fields(state, stats):
+  """The fields of a logged step's record (stats on the host); no progress-bar extras."""
+  fields = {'loss': float(stats['loss']), 'psnr': float(stats['psnr']),
+            'lr': float(stats['lr']), 'nan_skips': int(state.nan_skips),
+            'pseudo_rays': int(stats['pseudo_rays'])}
+  for k in ('depth_tv', 'depth_tv_weight', 'occ', 'interlevel', 'distortion',
+            'near_camera'):
+    if k in stats:
+      fields[k] = float(stats[k])
+  return fields, None
 
 
 def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
                 eval_fn=None, time_offset: float = 0., desc: str = 'train',
-                show_progress: bool = True) -> TrainResult:
-  """Trains a fresh model (or resumes the one in out_dir) for config.max_steps steps.
+                show_progress: bool = True) -> fit.TrainResult:
+  """Trains a fresh model (or resumes the one in out_dir) for config.max_steps steps
+  with fit.fit (keys, resume, log and checkpoints are the loop's).
 
   Args:
     config: Config. scene: Scene (for its camera).
@@ -361,7 +346,7 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
     desc: progress-bar label. show_progress: draw the bar.
 
   Returns:
-    TrainResult.
+    fit.TrainResult.
   """
   cam = Camera.of(scene)
   n_dev = jax.device_count()
@@ -369,35 +354,16 @@ def train_model(config, scene, out_dir, pools, window=(0, 0), init_params=None,
     raise ValueError(f'Config.batch_size={config.batch_size} is not divisible by the '
                      f'{n_dev} devices')
   has_pseudo = ('pseudo' in pools or 'mixed' in pools) and window[1] > window[0]
-  k_init, base_key = init_and_step_keys(config)
-  state, train_seconds, curve = rundir.resume_training(
-      out_dir, init_state(config, k_init, init_params))
-  state = jax.device_put(state, replicated_sharding())
   # Several processes: the pools and keys as global (replicated) arrays; every process
   # draws the same global batch and trains on its shard of it.
   pools = distributed.replicate(pools, replicated_sharding())
-  start = int(state.step)
-  bar = progress_bar(total=config.max_steps, initial=start, desc=desc,
-                     disable=not show_progress)
-  log = rundir.TrainingLog(config, out_dir, eval_fn, train_seconds, curve, time_offset, bar)
 
-  for step in range(start, config.max_steps):
-    pseudo_on = has_pseudo and window[0] <= step < window[1]
-    key = distributed.replicate(jax.random.fold_in(base_key, step), replicated_sharding())
-    state, stats = train_step(config, cam, pseudo_on, state, pools, key)
-    done = step + 1
-    bar.update(1)
-    if log.due(done):
-      stats = jax.device_get(stats)
-      log.stop_clock()
-      fields = {'loss': float(stats['loss']), 'psnr': float(stats['psnr']),
-                'lr': float(stats['lr']), 'nan_skips': int(state.nan_skips),
-                'pseudo_rays': int(stats['pseudo_rays'])}
-      for k in ('depth_tv', 'depth_tv_weight', 'occ', 'interlevel', 'distortion',
-                'near_camera'):
-        if k in stats:
-          fields[k] = float(stats[k])
-      log.record(done, state, fields)
-  bar.close()
-  train_seconds = log.train_seconds
-  return TrainResult(state=state, train_seconds=train_seconds, curve=curve)
+  def step_fn(state, pseudo_on, key):
+    key = distributed.replicate(key, replicated_sharding())
+    return train_step(config, cam, pseudo_on, state, pools, key)
+
+  return fit.fit(config, out_dir, lambda k_init: init_state(config, k_init, init_params),
+                 step_fn, _log_fields, window=window if has_pseudo else (0, 0),
+                 place=lambda state: jax.device_put(state, replicated_sharding()),
+                 eval_fn=eval_fn, time_offset=time_offset, desc=desc,
+                 show_progress=show_progress)

@@ -160,7 +160,7 @@ def test_uncertainty_heatmap_shows_the_order_despite_outliers_and_bad_values():
 def test_the_round_driver_runs_any_backbone_through_its_interface(tmp_path, monkeypatch):
   """A toy backbone (a constant colour per model) goes through the same round_step,
   resume and reports: the driver calls nothing of the NeRF's own."""
-  from renerf_jax import backbones, training  # pylint: disable=g-import-not-at-top
+  from renerf_jax import backbones, fit, training  # pylint: disable=g-import-not-at-top
   calls = []
 
   def train(config, scene, out_dir, pseudo, window, init_params, eval_fn, time_offset,
@@ -174,8 +174,8 @@ def test_the_round_driver_runs_any_backbone_through_its_interface(tmp_path, monk
     state = training.TrainState(step=np.int32(config.max_steps),
                                 params={'colour': np.float32(colour)}, opt_state=None,
                                 nan_skips=np.int32(0))
-    return training.TrainResult(state=state, train_seconds=1.,
-                                curve=[{'step': 1, 'eval_psnr': eval_fn(state.params)}])
+    return fit.TrainResult(state=state, train_seconds=1.,
+                           curve=[{'step': 1, 'eval_psnr': eval_fn(state.params)}])
 
   def render_views(config, scene, params, poses, show_progress=False):
     del config, show_progress
@@ -212,7 +212,7 @@ def test_the_round_driver_runs_any_backbone_through_its_interface(tmp_path, monk
   assert [c[:2] for c in calls] == [('train', 'baseline'), ('train', 'round 1'),
                                     ('train', 'round 2')]
   assert calls[0][4] is None and calls[1][4] == calls[2][4] == 12  # 7x on 3 views
-  assert calls[1][3] == training.pseudo_window(renerf.round_config(config, 1))
+  assert calls[1][3] == fit.pseudo_window(renerf.round_config(config, 1))
   assert [m['cumulative_seconds'] for m in state.metrics] == [1., 2.5, 4.]
   real = scene.images[scene.train_idx].reshape(-1, 3).mean(0, dtype=np.float64)
   np.testing.assert_allclose(state.params['colour'], real, rtol=1e-5)  # D = B here.
@@ -306,7 +306,7 @@ def test_round_config_d_seed_policies_and_init_seed_keys():
   """Config.d_seed: 'offset' gives D seed + 1000 r for its draws and its initialisation,
   'same_init' B's initialisation with new draws, 'same' B's Config; Config.init_seed
   seeds the initialisation alone (equal to seed: the same keys as unset)."""
-  from renerf_jax import training  # pylint: disable=g-import-not-at-top
+  from renerf_jax import fit  # pylint: disable=g-import-not-at-top
   from renerf_jax.configs import Config  # pylint: disable=g-import-not-at-top
   b = Config(seed=3)
   assert renerf.round_config(b, 0) == b
@@ -320,7 +320,7 @@ def test_round_config_d_seed_policies_and_init_seed_keys():
   assert (d.seed, d.init_seed) == (1003, 1007)
   d = renerf.round_config(Config(seed=3, init_seed=7, d_seed='same_init'), 1)
   assert (d.seed, d.init_seed) == (1003, 7)
-  keys = lambda c: [np.asarray(k) for k in training.init_and_step_keys(c)]
+  keys = lambda c: [np.asarray(k) for k in fit.init_and_step_keys(c)]
   ref = np.asarray(jax.random.split(jax.random.PRNGKey(3)))
   np.testing.assert_array_equal(np.stack(keys(b)), ref)
   np.testing.assert_array_equal(np.stack(keys(Config(seed=3, init_seed=3))), ref)

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from renerf_jax import rundir, training
+from renerf_jax import fit, rundir, training
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.errors import ConfigError
 from conftest import REPO, tiny_config
@@ -137,7 +137,7 @@ def test_train_model_resumes_from_a_mid_run_checkpoint(tmp_path, monkeypatch):
 _SHARD_SCRIPT = r'''
 import jax, numpy as np
 from conftest import tiny_config
-from renerf_jax import rundir, training
+from renerf_jax import fit, rundir, training
 from renerf_jax.datasets import load_scene, ray_pool
 config = tiny_config(depth_tv_loss_mult=0., anneal_nearfar=False, density_noise=0.)
 scene = load_scene(config)
@@ -167,7 +167,7 @@ def test_data_parallel_on_two_host_devices_matches_one():
                                              ('late', (70, 100))])
 def test_pseudo_windows_of_the_ablation_schedules(schedule, window):
   c = tiny_config(max_steps=100, pseudo_until_frac=0.3, pseudo_schedule=schedule)
-  assert training.pseudo_window(c) == window
+  assert fit.pseudo_window(c) == window
 
 
 def test_trunc_exp_value_clipped_gradient_and_huge_inputs():
@@ -300,3 +300,60 @@ def test_training_log_times_the_steps_only_and_writes_records_in_order(tmp_path,
   assert recs[1]['eval_psnr'] == 20.5 and curve == [recs[1]] and log.train_seconds == 9.
   assert bar.postfix == {'loss': '0.2500', 'psnr': '10.00', 'n': 4, 'test': '20.50'}
   assert [s for s, _ in rundir.list_checkpoints(rundir.training_paths(str(tmp_path))[0])] == [4]
+
+
+def test_fit_loop_keys_window_hook_and_resume(tmp_path):
+  """fit.fit, the loop of both backbones: the fresh state from init_and_step_keys' k_init,
+  step s gets fold_in(base_key, s) and pseudo_on inside the window, the hook runs after
+  each step with its 1-based index and key, logged records hold log_fields' fields; a
+  run stopped after its step-3 checkpoint resumes there and ends as the whole run."""
+  import flax  # pylint: disable=g-import-not-at-top
+
+  @flax.struct.dataclass
+  class State:
+    step: jnp.ndarray
+    params: jnp.ndarray
+
+  cfg = tiny_config(max_steps=6, print_every=2, eval_every=0, checkpoint_every=3, seed=4)
+  k_init, base_key = fit.init_and_step_keys(cfg)
+  calls, hooks = [], []
+
+  def init_state(key):
+    np.testing.assert_array_equal(key, k_init)
+    return State(step=jnp.zeros((), jnp.int32), params=jnp.zeros((), jnp.float32))
+
+  def step_fn(state, pseudo_on, key):
+    s = int(state.step)
+    calls.append((s, pseudo_on))
+    if s == stop_at[0]:
+      raise KeyboardInterrupt
+    np.testing.assert_array_equal(key, jax.random.fold_in(base_key, s))
+    draw = jax.random.uniform(key)
+    return state.replace(step=state.step + 1, params=state.params + draw), {'d': draw}
+
+  def after_step(state, done, key):
+    hooks.append(done)
+    np.testing.assert_array_equal(key, jax.random.fold_in(base_key, done - 1))
+    return state.replace(params=state.params * 0.5)
+
+  def run(out):
+    return fit.fit(cfg, out, init_state, step_fn,
+                   lambda st, stats: ({'loss': float(stats['d']), 'psnr': 0.}, None),
+                   window=(1, 3), after_step=after_step, show_progress=False)
+
+  stop_at = [None]
+  full = run(str(tmp_path / 'a'))
+  assert calls == [(0, False), (1, True), (2, True), (3, False), (4, False), (5, False)]
+  assert hooks == [1, 2, 3, 4, 5, 6] and int(full.state.step) == 6
+  recs = rundir.read_jsonl(str(tmp_path / 'a' / 'log.jsonl'))
+  assert [r['step'] for r in recs] == [2, 3, 4, 6] and full.curve == []
+  calls.clear()
+  stop_at[0] = 4
+  with pytest.raises(KeyboardInterrupt):
+    run(str(tmp_path / 'b'))
+  calls.clear()
+  stop_at[0] = None
+  resumed = run(str(tmp_path / 'b'))
+  assert [s for s, _ in calls] == [3, 4, 5]
+  assert float(resumed.state.params) == float(full.state.params)
+  assert rundir.read_jsonl(str(tmp_path / 'b' / 'log.jsonl'))[-1]['loss'] == recs[-1]['loss']

@@ -25,6 +25,7 @@ Rules of the reference 3DGS (Kerbl et al. 2023, `gaussian_model.py`):
   * opacity reset: opacities clamped to <= 0.01 (logit), with the opacity's Adam moments
     zeroed, as the reference replaces the tensor in its optimiser.
 New and changed slots start with zero Adam moments (`reset_adam_moments`).
+When each of these runs is the densification strategy's (strategy.py).
 """
 import flax
 import jax

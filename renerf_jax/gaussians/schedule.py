@@ -1,4 +1,5 @@
-"""3DGS's schedules in steps of the run: learning rates, the SH degree, densification.
+"""3DGS's schedules in steps of the run: learning rates and the SH degree (densification's
+is the strategy's, strategy.py).
 
 Intervals are fractions of Config.max_steps (3DGS's iteration counts over its 30k steps),
 so a short run keeps the reference's proportions.
@@ -41,14 +42,6 @@ def sh_degree_at(iteration, config):
   """SH degree at a 1-based iteration: +1 every sh_interval iterations, at most 3 (works
   on Python ints and traced arrays)."""
   return jnp.minimum(iteration // sh_interval(config), 3)
-
-
-def densify_schedule(config):
-  """(from, until, every, opacity_reset_every) in steps."""
-  return (steps_of(config.gs_densify_from_frac, config),
-          steps_of(config.gs_densify_until_frac, config),
-          steps_of(config.gs_densify_every_frac, config, 1),
-          steps_of(config.gs_opacity_reset_every_frac, config, 1))
 
 
 def make_optimizer(config, extent):

@@ -5,10 +5,11 @@ pseudo-view window, from the real and the pseudo-views together (the pseudo-view
 the real views as images drawn uniformly"); the loss is (1 - l) L1 + l (1 - SSIM) with
 per-pixel masks; per-parameter Adam learning rates (the position's decayed exponentially
 and scaled by the scene extent); the SH degree raised every `gs_sh_interval_frac` of the
-run (schedule.py); adaptive density control (density.py) between steps; the loss is
-loss.py's. `train_gaussians` mirrors
-`renerf_jax.training.train_model` at the edges: atomic checkpoints, bit-for-bit resume,
-the JSONL log, the evaluation curve and the progress bar. With several processes
+run (schedule.py); adaptive density control by the densification strategy
+(strategy.py: statistics inside the step, growing, pruning and opacity resets between
+steps); the loss is loss.py's. `train_gaussians` runs renerf_jax.fit.fit, the loop of
+both backbones: atomic checkpoints, bit-for-bit resume, the JSONL log, the evaluation
+curve and the progress bar. With several processes
 (renerf_jax.distributed) every process runs the same step on the same image (one image
 a step has no batch to split; the state stays on each process's own device), and the
 renders of whole views are split across processes (render_views).
@@ -28,16 +29,15 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from renerf_jax import distributed, metrics, rundir
+from renerf_jax import distributed, fit, metrics
 from renerf_jax.errors import DataError
 from renerf_jax.gaussians import density
 from renerf_jax.gaussians import params as params_lib
 from renerf_jax.gaussians import render as render_lib
 from renerf_jax.gaussians.loss import image_loss
-from renerf_jax.gaussians.schedule import (densify_schedule, make_optimizer, means_lr,
-                                           set_means_lr, sh_degree_at)
+from renerf_jax.gaussians.schedule import make_optimizer, means_lr, set_means_lr, sh_degree_at
+from renerf_jax.gaussians.strategy import DensityStrategy
 from renerf_jax.progress import progress_bar
-from renerf_jax.training import TrainResult, init_and_step_keys
 
 NEAR = 0.2  # Gaussians nearer than this depth are culled (the reference's frustum test).
 TILE = 16
@@ -49,7 +49,7 @@ class GaussianTrainState:
   params: params_lib.Gaussians
   opt_state: Any  # optax state of the schedule.FIELDS dict (see to_fields).
   nan_skips: jnp.ndarray  # int32 scalar: steps skipped for a non-finite loss/gradient.
-  stats: density.DensityStats  # Densification statistics since the last densification.
+  stats: density.DensityStats  # The densification strategy's state (its statistics).
   dropped: jnp.ndarray  # int32 scalar: densification candidates that found no free slot.
   pseudo_images: jnp.ndarray  # int32 scalar: steps that drew a pseudo-view.
 
@@ -153,7 +153,8 @@ def init_state(config, params, extent) -> GaussianTrainState:
   zero = lambda: jnp.zeros((), jnp.int32)  # Distinct buffers: the steps donate them.
   return GaussianTrainState(step=zero(), params=params, opt_state=opt_state,
                             nan_skips=zero(),
-                            stats=density.init_stats(params.means.shape[0]),
+                            stats=DensityStrategy.of(config).initialize_state(
+                                params.means.shape[0]),
                             dropped=zero(), pseudo_images=zero())
 
 
@@ -245,9 +246,8 @@ def train_step(config, cam: Camera, pseudo_on: bool, state: GaussianTrainState, 
   keep = lambda new, old: jnp.where(apply, new, old)
   new_fields = jax.tree_util.tree_map(keep, new_fields, fields)
   new_opt = jax.tree_util.tree_map(keep, new_opt, state.opt_state)
-  _, until, _, _ = densify_schedule(config)
-  stats = density.accumulate(state.stats, grad2d, out['radius'], cam.h, cam.w,
-                             on=apply & (iteration < until))
+  stats = DensityStrategy.of(config).update_state(state.stats, grad2d, out['radius'],
+                                                  cam.h, cam.w, iteration, apply)
   is_pseudo = data['is_pseudo'][idx]
   step_stats = {'loss': loss, 'mse': mse, 'psnr': metrics.mse_to_psnr(mse), 'lr': lr,
                 'finite': finite, 'sh_degree': degree, 'cap_bound': out['cap_bound'],
@@ -259,28 +259,6 @@ def train_step(config, cam: Camera, pseudo_on: bool, state: GaussianTrainState, 
       dropped=state.dropped, pseudo_images=state.pseudo_images + is_pseudo.astype(
           jnp.int32))
   return new_state, step_stats
-
-
-@functools.partial(jax.jit, static_argnums=(0,), donate_argnums=(1,))
-def densify_state(config, state: GaussianTrainState, extent, key, prune_big):
-  """density.densify_and_prune on the state: new slots get zero Adam moments, the
-  statistics restart from zero. Returns (state, info)."""
-  g, reset, info = density.densify_and_prune(
-      state.params, state.stats, key, config.gs_grad_threshold, config.gs_percent_dense,
-      extent, config.gs_min_opacity, prune_big)
-  opt_state = density.reset_adam_moments(state.opt_state, reset)
-  return state.replace(params=g, opt_state=opt_state,
-                       stats=density.init_stats(g.means.shape[0]),
-                       dropped=state.dropped + info['dropped']), info
-
-
-@functools.partial(jax.jit, donate_argnums=(0,))
-def opacity_reset_state(state: GaussianTrainState):
-  """density.reset_opacity, with the opacity's Adam moments zeroed for every slot."""
-  n = state.params.means.shape[0]
-  opt_state = density.reset_adam_moments(state.opt_state, jnp.ones((n,), bool),
-                                         fields=('opacity_logits',))
-  return state.replace(params=density.reset_opacity(state.params), opt_state=opt_state)
 
 
 def training_data(scene, pseudo=None):
@@ -305,10 +283,22 @@ def training_data(scene, pseudo=None):
 # ------------------------------------------------------------------------- the loop
 
 
+def _log_fields(state, stats):
+  """The fields of a logged step's record (stats on the host) and the bar's count."""
+  n = int(jnp.sum(state.params.active))
+  return {'loss': float(stats['loss']), 'psnr': float(stats['psnr']),
+          'lr': float(stats['lr']), 'nan_skips': int(state.nan_skips),
+          'pseudo_rays': int(stats['pseudo_rays']),
+          'pseudo_images': int(state.pseudo_images), 'num_gaussians': n,
+          'cap_bound': float(stats['cap_bound']), 'dropped': int(state.dropped),
+          'sh_degree': int(stats['sh_degree'])}, {'n': n}
+
+
 def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=None,
                     eval_fn=None, time_offset: float = 0., desc: str = 'train',
-                    show_progress: bool = True) -> TrainResult:
-  """Trains a fresh Gaussian scene (or resumes the one in out_dir) for max_steps steps.
+                    show_progress: bool = True) -> fit.TrainResult:
+  """Trains a fresh Gaussian scene (or resumes the one in out_dir) for max_steps steps
+  with fit.fit, the densification strategy between steps.
 
   Args:
     config: Config. scene: Scene (images, poses, camera, world box).
@@ -323,54 +313,34 @@ def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=N
     desc: progress-bar label. show_progress: draw the bar.
 
   Returns:
-    training.TrainResult whose state is a GaussianTrainState.
+    fit.TrainResult whose state is a GaussianTrainState.
   """
   cam = Camera.of(scene)
   extent = scene_extent(config, scene)
   extent_arr = jnp.asarray(extent, jnp.float32)
   has_pseudo = pseudo is not None and window[1] > window[0]
-  k_init, base_key = init_and_step_keys(config)
-  params = init_gaussians(config, scene, k_init) if init_params is None else init_params
-  state, train_seconds, curve = rundir.resume_training(
-      out_dir, init_state(config, params, extent))
-  # Own copies: the jitted steps donate the state, never the caller's init_params.
-  state = strong_types(state)
+  strategy = DensityStrategy.of(config)
+
+  def fresh_state(k_init):
+    params = init_gaussians(config, scene, k_init) if init_params is None else init_params
+    return init_state(config, params, extent)
+
   data = {False: training_data(scene)}
   if has_pseudo:
     data[True] = training_data(scene, pseudo)
-  d_from, d_until, d_every, reset_every = densify_schedule(config)
-  start = int(state.step)
-  bar = progress_bar(total=config.max_steps, initial=start, desc=desc,
-                     disable=not show_progress)
-  log = rundir.TrainingLog(config, out_dir, eval_fn, train_seconds, curve, time_offset, bar)
 
-  for step in range(start, config.max_steps):
-    pseudo_on = has_pseudo and window[0] <= step < window[1]
-    k_step, k_dens = jax.random.split(jax.random.fold_in(base_key, step))
-    state, stats = train_step(config, cam, pseudo_on, state, data[pseudo_on], extent_arr,
-                              k_step)
-    done = step + 1  # The reference's 1-based iteration.
-    if done < d_until:
-      if done > d_from and done % d_every == 0:
-        state, _ = densify_state(config, state, extent_arr, k_dens,
-                                 jnp.asarray(done > reset_every))
-      if done % reset_every == 0:
-        state = opacity_reset_state(state)
-    bar.update(1)
-    if log.due(done):
-      stats = jax.device_get(stats)
-      log.stop_clock()
-      n = int(jnp.sum(state.params.active))
-      log.record(done, state, {
-          'loss': float(stats['loss']), 'psnr': float(stats['psnr']),
-          'lr': float(stats['lr']), 'nan_skips': int(state.nan_skips),
-          'pseudo_rays': int(stats['pseudo_rays']),
-          'pseudo_images': int(state.pseudo_images), 'num_gaussians': n,
-          'cap_bound': float(stats['cap_bound']), 'dropped': int(state.dropped),
-          'sh_degree': int(stats['sh_degree'])}, postfix={'n': n})
-  bar.close()
-  train_seconds = log.train_seconds
-  return TrainResult(state=state, train_seconds=train_seconds, curve=curve)
+  def step_fn(state, pseudo_on, key):  # The densification draws from split(key)[1].
+    return train_step(config, cam, pseudo_on, state, data[pseudo_on], extent_arr,
+                      jax.random.split(key)[0])
+
+  # place: own copies, since the jitted steps donate the state, never the caller's
+  # init_params.
+  return fit.fit(config, out_dir, fresh_state, step_fn, _log_fields,
+                 window=window if has_pseudo else (0, 0), place=strong_types,
+                 after_step=lambda state, done, key: strategy.step_post_backward(
+                     state, done, extent_arr, key),
+                 eval_fn=eval_fn, time_offset=time_offset, desc=desc,
+                 show_progress=show_progress)
 
 
 # ------------------------------------------------------------------------- rendering

@@ -6,7 +6,8 @@ which opacities get gradients, and how fast the training PSNR recovers.
 import jax, jax.numpy as jnp, numpy as np, dataclasses
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax.gaussians import training as gt, density
+from renerf_jax.gaussians import training as gt
+from renerf_jax.gaussians.strategy import DensityStrategy
 OLD = ['Config.gs_sh_interval_frac = 0.05', 'Config.gs_grad_threshold = 5e-4',
        'Config.gs_min_opacity = 0.005', 'Config.gs_lr_means_init = 1.6e-4',
        'Config.gs_lr_means_final = 1.6e-6']  # The FSGS-schedule config of the probes.
@@ -22,7 +23,7 @@ for s in range(300):
 print('psnr before reset', float(st['psnr']), 'extent', extent)
 op = jax.nn.sigmoid(state.params.opacity_logits)
 print('opacity quantiles', np.quantile(np.asarray(op), [0.1, 0.5, 0.9, 0.99]))
-state = gt.opacity_reset_state(state)
+state = DensityStrategy.of(config).reset_opacity(state)
 img, pose, mask = data['images'][0], data['poses'][0], data['masks'][0]
 loss, mse, out, grads, g2 = gt.loss_and_grads(config, cam, state.params, img, pose, mask, jnp.int32(0))
 g = np.asarray(grads['opacity_logits'])
