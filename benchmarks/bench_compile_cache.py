@@ -25,10 +25,11 @@ def child(config_path, bindings, cache_dir):
   """Times the train step in this process; prints one JSON line."""
   import dataclasses  # pylint: disable=g-import-not-at-top
   import jax  # pylint: disable=g-import-not-at-top
-  from renerf_jax import jit_cache, training  # pylint: disable=g-import-not-at-top
+  from renerf_jax import jit_cache  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf import training  # pylint: disable=g-import-not-at-top
   from renerf_jax.configs import load_config  # pylint: disable=g-import-not-at-top
   from renerf_jax.datasets import load_scene  # pylint: disable=g-import-not-at-top
-  from renerf_jax.renerf import make_pools  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf.pools import make_pools  # pylint: disable=g-import-not-at-top
   jit_cache.enable_compilation_cache(cache_dir)
   config = load_config([config_path], bindings)
   scene = load_scene(config)

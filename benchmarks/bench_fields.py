@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from renerf_jax.fields.grid import GridField, grid_indices, normalize_points
-from renerf_jax.fields.mlp import MipMLP
+from renerf_jax.nerf.fields.grid import GridField, grid_indices, normalize_points
+from renerf_jax.nerf.fields.mlp import MipMLP
 
 
 def make_inputs(key, rays, samples):

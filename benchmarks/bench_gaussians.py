@@ -22,11 +22,12 @@ import numpy as np
 
 from benchmarks.bench_throughput import time_calls
 from experiments.tables import command_line
-from renerf_jax import report, training
+from renerf_jax import report
+from renerf_jax.nerf import training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.gaussians import training as gtrain
-from renerf_jax.renerf import make_pools
+from renerf_jax.nerf.pools import make_pools
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

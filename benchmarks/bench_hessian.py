@@ -30,10 +30,11 @@ import numpy as np
 
 from benchmarks.bench_throughput import time_calls
 from experiments.tables import command_line
-from renerf_jax import model, report
+from renerf_jax import report
+from renerf_jax.nerf import model
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
-from renerf_jax.fields import init_field_params
+from renerf_jax.nerf.fields import init_field_params
 from renerf_jax.uncertainty import laplace
 from renerf_jax.uncertainty.deformation import grid_size, trilinear_corners
 

@@ -69,10 +69,10 @@ def bytes_table(hlo_bytes):
 def hlo_worker(args):
   """Prints {config: all-reduced bytes} of each NeRF config's compiled step on the
   devices this process has (run with 2 forced CPU devices)."""
-  from renerf_jax import training  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf import training  # pylint: disable=g-import-not-at-top
   from renerf_jax.configs import load_config  # pylint: disable=g-import-not-at-top
   from renerf_jax.datasets import load_scene  # pylint: disable=g-import-not-at-top
-  from renerf_jax.renerf import make_pools  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf.pools import make_pools  # pylint: disable=g-import-not-at-top
   out = {}
   for path in NERF_CONFIGS:
     config = load_config([path], [f"Config.data_dir = '{args.data_dir}'"])
@@ -110,10 +110,11 @@ def hlo_collective_bytes(hlo_text):
 
 def worker(args):
   """One process of the timing run: prints one JSON line (process 0)."""
-  from renerf_jax import distributed, training  # pylint: disable=g-import-not-at-top
+  from renerf_jax import distributed  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf import training  # pylint: disable=g-import-not-at-top
   from renerf_jax.configs import load_config  # pylint: disable=g-import-not-at-top
   from renerf_jax.datasets import load_scene  # pylint: disable=g-import-not-at-top
-  from renerf_jax.renerf import make_pools  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf.pools import make_pools  # pylint: disable=g-import-not-at-top
   if args.num_processes > 1:
     distributed.start(distributed.Cluster(args.num_processes, args.process_id,
                                           args.coordinator_address, 'flags'),

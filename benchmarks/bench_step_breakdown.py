@@ -35,12 +35,13 @@ import numpy as np
 
 from benchmarks.bench_throughput import time_calls, xla_cost
 from experiments.tables import command_line
-from renerf_jax import mip, model, regularizers, report, training
+from renerf_jax import report
+from renerf_jax.nerf import mip, model, regularizers, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax.fields import make_field
-from renerf_jax.fields.proposal import make_proposal
-from renerf_jax.renerf import make_pools
+from renerf_jax.nerf.fields import make_field
+from renerf_jax.nerf.fields.proposal import make_proposal
+from renerf_jax.nerf.pools import make_pools
 
 
 def _time(fn, args, repeats):

@@ -29,12 +29,13 @@ import numpy as np
 
 from benchmarks.bench_train_step import matmul_gflops
 from experiments.tables import command_line
-from renerf_jax import model, report, training
+from renerf_jax import report
+from renerf_jax.nerf import model, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene, ray_pool
-from renerf_jax.fields import init_field_params
-from renerf_jax.rendering import _render_chunk
-from renerf_jax.renerf import make_pools
+from renerf_jax.nerf.fields import init_field_params
+from renerf_jax.nerf.rendering import _render_chunk
+from renerf_jax.nerf.pools import make_pools
 from renerf_jax.uncertainty import deformation, laplace
 
 

@@ -16,10 +16,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.tables import command_line
-from renerf_jax import model, report, training
+from renerf_jax import report
+from renerf_jax.nerf import model, training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax.renerf import make_pools
+from renerf_jax.nerf.pools import make_pools
 
 
 def matmul_gflops(n=2048, repeats=5):

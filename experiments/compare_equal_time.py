@@ -39,10 +39,11 @@ import jax
 import numpy as np
 
 from experiments import tables
-from renerf_jax import figures, jit_cache, report, rundir, training
+from renerf_jax import figures, jit_cache, report, rundir
+from renerf_jax.nerf import training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax.renerf import make_pools
+from renerf_jax.nerf.pools import make_pools
 from renerf_jax.round_driver import run_rounds
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')

@@ -24,10 +24,11 @@ import shutil
 import jax
 import numpy as np
 
-from renerf_jax import pseudo_views, renerf, report, rundir
+from renerf_jax import report, rundir
 from renerf_jax.backbones import get_backbone
 from renerf_jax.configs import config_differences, fields_where
 from renerf_jax.uncertainty import laplace
+from renerf_jax.nerf import synthesis
 
 
 # --------------------------------------------------------------- memo keys and caches
@@ -107,7 +108,7 @@ VIEW_CACHE_BYTES = 1 << 30  # About 2000 views at 252x189, 470 at 504x378.
 class ViewCache:
   """Rendered pseudo-views keyed on (config without RENDER_IRRELEVANT, params, rays).
 
-  Called as pseudo_views.render_pseudo_views' render_fn: a view rendered before in this
+  Called as synthesis.render_pseudo_views' render_fn: a view rendered before in this
   process comes back bit for bit with the seconds its render took; `hits` and `misses`
   count the calls of each kind.
   """
@@ -128,7 +129,7 @@ class ViewCache:
       self.hits += 1
       return hit[0].copy(), hit[1]
     self.misses += 1
-    rgb, seconds = pseudo_views.render_view(config, params, rays)
+    rgb, seconds = synthesis.render_view(config, params, rays)
     self.cache.put(key, (rgb.copy(), seconds))
     return rgb, seconds
 
@@ -163,11 +164,11 @@ HESSIAN_CACHE = HessianCache()
 
 
 def memo_synthesize(config, scene, params, show_progress=False):
-  """renerf.synthesize with the process's Hessian and view memos (NeRF backbones; any
+  """synthesis.synthesize with the process's Hessian and view memos (NeRF backbones; any
   other backbone synthesises through its own Backbone.synthesize, unmemoised)."""
   if config.backbone != 'nerf':
     return get_backbone(config).synthesize(config, scene, params, show_progress)
-  return renerf.synthesize(config, scene, params, show_progress, sigma_fn=HESSIAN_CACHE,
+  return synthesis.synthesize(config, scene, params, show_progress, sigma_fn=HESSIAN_CACHE,
                            render_fn=VIEW_CACHE)
 
 

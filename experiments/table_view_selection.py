@@ -4,7 +4,7 @@ Round 1 variants on top of one shared baseline per seed: the interpolation-facto
 2x {.5}; 3x {.33,.66}, {.2,.8}, {.1,.9}; 4x; 5x; 7x (the default); 11x; then pseudo-views
 rendered at the test poses only (the paper's "optimising for specific views") against as
 many random unobserved poses. The presets overlap (7x holds 5x, 3x_b and 3x_c; 11x holds
-7x): within one process each view is rendered once (pseudo_views.render_pseudo_views),
+7x): within one process each view is rendered once (synthesis.render_pseudo_views),
 and a variant still counts the seconds its views took.
 
 Fern on the 2-core CPU with the hour-budget table config (table_tiny.gin: 126x94,

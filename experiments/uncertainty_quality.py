@@ -31,7 +31,8 @@ import time
 import numpy as np
 
 from experiments.tables import command_line, mean_std
-from renerf_jax import cli, contraction, figures, jit_cache, report, round_driver, rundir
+from renerf_jax import cli, figures, jit_cache, report, round_driver, rundir
+from renerf_jax.nerf import contraction
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import camera_rays, load_scene, ray_pool
 from renerf_jax.progress import progress_bar

@@ -21,8 +21,8 @@ import numpy as np
 from renerf_jax import renerf, report, round_driver, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import camera_rays, load_scene
-from renerf_jax.model import empty_outside_box, render_rays
-from renerf_jax.regularizers import near_camera_ray_weight
+from renerf_jax.nerf.model import empty_outside_box, render_rays
+from renerf_jax.nerf.regularizers import near_camera_ray_weight
 
 
 @functools.partial(jax.jit, static_argnums=(0, 4))

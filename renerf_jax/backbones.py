@@ -15,23 +15,24 @@ arrays that round_driver.py writes:
 and, for anything that looks at a model, `render_views(config, scene, params, poses)`:
 RGB, depth and accumulated opacity at cameras; optionally `export(params, round_dir)`,
 extra files of a finished round (the Gaussians' .ply). `Config.backbone` picks one:
-'nerf' (the RegNeRF-style mip-NeRF, with the MLP or grid field of `Config.field`) or
-'gaussians' (3D Gaussian Splatting, renerf_jax/gaussians: whole images a step, no
-uncertainty masks unless Config.mask_signal = 'one_minus_acc').
+'nerf' (the RegNeRF-style mip-NeRF, with the MLP or grid field of `Config.field`:
+renerf_jax/nerf/backbone.py) or 'gaussians' (3D Gaussian Splatting: whole images a step,
+no uncertainty masks unless Config.mask_signal = 'one_minus_acc':
+renerf_jax/gaussians/backbone.py). This module holds the protocol, the registry (each
+backbone's package is imported when a Config first asks for it, so the round driver
+never imports a backbone's internals) and the helpers any backbone that renders whole
+views can use.
 """
 import dataclasses
+import importlib
 import time
 from typing import Callable, Optional
 
-import jax
 import numpy as np
 
-from renerf_jax import metrics, pseudo_views, renerf, rundir, training
-from renerf_jax.datasets import camera_rays
+from renerf_jax import metrics, pseudo_views
 from renerf_jax.errors import ConfigError
-from renerf_jax.evaluation import cheap_eval_fn, evaluate_test_views, evaluate_views
 from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses
-from renerf_jax.rendering import render_image
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,65 +49,18 @@ class Backbone:
   export: Optional[Callable] = None
 
 
-# ------------------------------------------------------------------------- the NeRFs
+# Config.backbone -> the module whose BACKBONE implements it.
+REGISTRY = {'nerf': 'renerf_jax.nerf.backbone', 'gaussians': 'renerf_jax.gaussians.backbone'}
 
 
-def nerf_init_params(config):
-  """The NeRF's parameter template (the init of seed key 0)."""
-  return training.init_state(config, jax.random.PRNGKey(0)).params
+def get_backbone(config) -> Backbone:
+  """The Backbone of `config.backbone` (its package imported on first use)."""
+  if config.backbone not in REGISTRY:
+    raise ConfigError(f'Config.backbone={config.backbone!r} ({", ".join(REGISTRY)})')
+  return importlib.import_module(REGISTRY[config.backbone]).BACKBONE
 
 
-def nerf_train(config, scene, out_dir, pseudo, **kwargs):
-  """Trains a NeRF on the real views plus `pseudo` (training.train_model's kwargs), from
-  the ray pools of renerf.make_pools."""
-  return training.train_model(config, scene, out_dir,
-                              renerf.make_pools(config, scene, pseudo), **kwargs)
-
-
-def nerf_synthesize(config, scene, params, show_progress=False):
-  """renerf.synthesize: pseudo-views, with Laplace or Hessian-free masks."""
-  return renerf.synthesize(config, scene, params, show_progress)
-
-
-def nerf_render_views(config, scene, params, poses, show_progress=False):
-  """RGB [N, H, W, 3], depth [N, H, W] (the ray-distance expectation) and accumulated
-  opacity [N, H, W] of the NeRF at camera-to-world `poses` [N, 3, 4]."""
-  rays = camera_rays(scene, None, np.asarray(poses, np.float32))
-  outs = [render_image(config, params, jax.tree_util.tree_map(lambda x, i=i: x[i], rays),
-                       show_progress=show_progress, desc=f'view {i}')
-          for i in range(len(poses))]
-  return {'rgb': np.stack([o['rgb'] for o in outs]),
-          'depth': np.stack([o['distance'] for o in outs]),
-          'acc': np.stack([o['acc'] for o in outs])}
-
-
-NERF = Backbone(name='nerf', init_params=nerf_init_params, train=nerf_train,
-                synthesize=nerf_synthesize, cheap_eval_fn=cheap_eval_fn,
-                evaluate=evaluate_test_views, render_views=nerf_render_views)
-
-
-# ------------------------------------------------------------------ 3D Gaussian Splatting
-
-
-def _gs():
-  from renerf_jax.gaussians import training as gs_training  # pylint: disable=g-import-not-at-top
-  return gs_training
-
-
-def gaussians_init_params(config):
-  """The Gaussians' parameter template: Config.gs_capacity empty slots."""
-  return _gs().init_params(config)
-
-
-def gaussians_train(config, scene, out_dir, pseudo, **kwargs):
-  """3DGS from scratch on the real views plus `pseudo` (whole images, drawn uniformly
-  while the pseudo-views are on)."""
-  return _gs().train_gaussians(config, scene, out_dir, pseudo, **kwargs)
-
-
-def gaussians_render_views(config, scene, params, poses, show_progress=False):
-  """RGB, expected depth and accumulated opacity of the Gaussians at `poses`."""
-  return _gs().render_views(config, scene, params, poses, show_progress=show_progress)
+# ------------------------------------------------------ backbones that render whole views
 
 
 def synthesize_by_rendering(render_views: Callable, config, scene, params,
@@ -116,7 +70,7 @@ def synthesize_by_rendering(render_views: Callable, config, scene, params,
   only signal that needs nothing but a render; the paper uses no masks on 3DGS).
 
   Returns:
-    (PseudoViews, timing, meta) as renerf.synthesize.
+    (PseudoViews, timing, meta) as a Backbone's synthesize.
   """
   from renerf_jax.uncertainty import masks as uncertainty_masks  # pylint: disable=g-import-not-at-top
   if config.pseudo_source == 'photo':
@@ -144,14 +98,9 @@ def synthesize_by_rendering(render_views: Callable, config, scene, params,
   return pv, timing, meta
 
 
-def gaussians_synthesize(config, scene, params, show_progress=False):
-  return synthesize_by_rendering(gaussians_render_views, config, scene, params,
-                                 show_progress)
-
-
 def cheap_eval_by_rendering(render_views: Callable, config, scene):
   """params -> PSNR on config.eval_n_views test views at pixel stride
-  config.eval_stride (as evaluation.cheap_eval_fn), from whole renders."""
+  config.eval_stride (as the NeRF's nerf.evaluation.cheap_eval_fn), from whole renders."""
   idx = scene.test_idx[:config.eval_n_views]
   s = config.eval_stride
   gt = scene.images[idx][:, ::s, ::s]
@@ -160,41 +109,3 @@ def cheap_eval_by_rendering(render_views: Callable, config, scene):
     rgb = np.clip(render_views(config, scene, params, scene.poses[idx])['rgb'], 0., 1.)
     return float(metrics.mse_to_psnr(np.mean((rgb[:, ::s, ::s] - gt)**2)))
   return fn
-
-
-def gaussians_cheap_eval_fn(config, scene):
-  return cheap_eval_by_rendering(gaussians_render_views, config, scene)
-
-
-def gaussians_evaluate(config, scene, params, show_progress=False):
-  """Test-view metrics and renders of the Gaussians (evaluation.Evaluation); the views
-  are rendered in one call (split across processes when there are several)."""
-  out = gaussians_render_views(config, scene, params, scene.poses[scene.test_idx],
-                               show_progress=show_progress)
-
-  def render_view(j, i):
-    del i
-    return {'rgb': out['rgb'][j], 'distance': out['depth'][j]}
-  return evaluate_views(config, scene, render_view)
-
-
-def gaussians_export(params, rdir):
-  """The round's Gaussians as rdir/point_cloud.ply, the reference 3DGS layout that
-  splat viewers open (active Gaussians only)."""
-  from renerf_jax.gaussians import ply  # pylint: disable=g-import-not-at-top
-  ply.write_ply(rundir.point_cloud_path(rdir), params)
-
-
-GAUSSIANS = Backbone(name='gaussians', init_params=gaussians_init_params,
-                     train=gaussians_train, synthesize=gaussians_synthesize,
-                     cheap_eval_fn=gaussians_cheap_eval_fn, evaluate=gaussians_evaluate,
-                     render_views=gaussians_render_views, export=gaussians_export)
-
-BACKBONES = {'nerf': NERF, 'gaussians': GAUSSIANS}
-
-
-def get_backbone(config) -> Backbone:
-  """The Backbone of `config.backbone`."""
-  if config.backbone not in BACKBONES:
-    raise ConfigError(f'Config.backbone={config.backbone!r} ({", ".join(BACKBONES)})')
-  return BACKBONES[config.backbone]

@@ -5,16 +5,12 @@ Nothing here writes a file: round_driver.save_pseudo_views does, at the edge.
 import time
 
 import flax
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from renerf_jax import poses as pose_lib
 from renerf_jax import figures, random_poses
-from renerf_jax.datasets import camera_rays
 from renerf_jax.errors import ConfigError
-from renerf_jax.progress import progress_bar
-from renerf_jax.rendering import render_flat
 
 
 @flax.struct.dataclass
@@ -126,64 +122,6 @@ def random_target_poses(config, scene):
   return random_poses.random_unobserved_poses(train, config.pseudo_n_random, rng,
                                               scene.forward_facing, scene.focus_depth,
                                               config.random_pose_spread)
-
-
-def render_view(config, params, rays):
-  """One view's colours and the seconds the render took: render_pseudo_views' default
-  render_fn.
-
-  Args:
-    config: Config. params: model B. rays: Rays of one view, flat [H * W, ...].
-
-  Returns:
-    (rgb [H * W, 3] float32 clipped to [0, 1], wall seconds).
-  """
-  t0 = time.perf_counter()
-  rgb = np.clip(np.asarray(render_flat(config, params, rays)['rgb'], np.float32), 0., 1.)
-  return rgb, time.perf_counter() - t0
-
-
-def render_pseudo_views(config, scene, params, poses, show_progress=True, render_fn=None):
-  """Renders model `params` at `poses`; all pixels valid (masks of ones).
-
-  Each view's rays are made and rendered on their own (they start a chunk), so a view's
-  pixels do not depend on which other views a round renders.
-
-  Args:
-    config: Config. scene: Scene (camera). params: model B. poses: [M, 3, 4].
-    show_progress: draw a progress bar over views.
-    render_fn: (config, params, rays of one view) -> (rgb [H * W, 3] in [0, 1], the
-      seconds it costs); None: render_view. (experiments/sharing.py passes one that
-      renders each distinct view once per process and reports the seconds of that
-      render.)
-
-  Returns:
-    (PseudoViews, info: {'render_seconds': the wall time of this call, each view's
-    render counted with the seconds render_fn reports for it}).
-  """
-  t0 = time.perf_counter()
-  m, h, w = len(poses), scene.height, scene.width
-  render_fn = render_fn or render_view
-  images = np.zeros((m, h, w, 3), np.float32)
-  reported = measured = 0.
-  bar = progress_bar(total=m, unit='view', disable=not show_progress,
-                     desc=f'pseudo-views ({m})')
-  for i in range(m):
-    # One pose at a time: batched ray generation differs in the last bit between batches.
-    rays = camera_rays(scene, None, poses[i:i + 1])
-    view = jax.tree_util.tree_map(lambda v: np.asarray(v).reshape((h * w,) + v.shape[3:]),
-                                  rays)
-    t_view = time.perf_counter()
-    rgb, s = render_fn(config, params, view)
-    measured += time.perf_counter() - t_view
-    reported += float(s)
-    images[i] = np.asarray(rgb, np.float32).reshape(h, w, 3)
-    bar.update(1)
-  bar.close()
-  pv = PseudoViews(images=images, poses=np.asarray(poses),
-                   masks=np.ones((m, h, w), np.float32),
-                   uncertainty=np.zeros((m, h, w), np.float32))
-  return pv, {'render_seconds': time.perf_counter() - t0 - measured + reported}
 
 
 def uncertainty_heatmap(u, ref=None):

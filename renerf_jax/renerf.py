@@ -14,17 +14,13 @@ their paths in `rundir.py`) live at the edge, in `round_driver.py`, which hands 
 its synthesis, training and evaluation functions bound to a round directory.
 """
 import dataclasses
-import time
 from typing import Any, Callable, Optional, Tuple
 
 import flax
-import jax.numpy as jnp
-import numpy as np
 
-from renerf_jax import contraction, fit, pseudo_views, random_poses, report, training
-from renerf_jax.datasets import camera_rays, ray_pool
+from renerf_jax import backbones, fit, report
 from renerf_jax.errors import ConfigError
-from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses, render_pseudo_views
+from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses
 
 
 @flax.struct.dataclass
@@ -58,102 +54,6 @@ def round_config(config, r):
   return dataclasses.replace(config, seed=config.seed + 1000 * r, init_seed=init)
 
 
-def regularizer_poses(config, scene):
-  """Random unobserved poses for depth TV ([n_random_poses, 3, 4]), or None when off."""
-  if config.depth_tv_loss_mult <= 0:
-    return None
-  rng = np.random.default_rng(config.seed)
-  train = np.asarray(scene.poses[scene.train_idx], np.float64)
-  poses = random_poses.random_unobserved_poses(train, config.n_random_poses, rng,
-                                               scene.forward_facing, scene.focus_depth,
-                                               config.random_pose_spread)
-  return jnp.asarray(poses, jnp.float32)
-
-
-def make_pools(config, scene, pseudo: Optional[PseudoViews]):
-  """The NeRF backbone's training pools: real views, pseudo-views (if any: 'mixed' with
-  the real rays for Config.pseudo_mix='pixels', 'pseudo' alone for 'fraction'), random
-  poses (depth TV), the training cameras' centres (the near-camera penalty)."""
-  pools = {'real': ray_pool(scene, scene.train_idx)}
-  if pseudo is not None:
-    pool = ray_pool(scene, None, images=pseudo.images, masks=pseudo.masks,
-                    poses=pseudo.poses)
-    if config.pseudo_mix == 'pixels':
-      pools['mixed'] = training.mixed_pool(pools['real'], pool)
-    else:
-      pools['pseudo'] = pool
-  poses = regularizer_poses(config, scene)
-  if poses is not None:
-    pools['random_poses'] = poses
-  if config.near_camera_loss_mult > 0:
-    pools['camera_centres'] = jnp.asarray(scene.poses[scene.train_idx][:, :3, 3],
-                                          jnp.float32)
-  return pools
-
-
-def synthesize(config, scene, params, show_progress=False, sigma_fn=None, render_fn=None):
-  """Pseudo-views of model `params`, with uncertainty masks if config.use_masks.
-
-  With masks, the Hessian pass runs first and the colours and the uncertainty of the
-  pseudo-views come out of one render pass.
-
-  Args:
-    config, scene: Config and Scene. params: model B.
-    show_progress: draw progress bars.
-    sigma_fn: the Hessian pass (uncertainty.masks.compute_masks' sigma_fn; None:
-      uncertainty.laplace.vertex_sigma_pass).
-    render_fn: renders one unmasked view (pseudo_views.render_pseudo_views' render_fn;
-      None: pseudo_views.render_view).
-
-  Returns:
-    (PseudoViews, timing: {'seconds': total; 'render_seconds'; with masks
-    'hessian_seconds', 'mu', 'kept_fraction'}, meta: a description of each view). The
-    Hessian pass and each view's render count with the seconds sigma_fn / render_fn
-    report for them: a function that reuses earlier work reports what that work cost, so
-    sharing work never makes a round look cheaper.
-  """
-  if config.pseudo_source == 'photo':
-    return pseudo_views.photo_pseudo_views(config, scene)
-  t0 = time.perf_counter()
-  poses, meta = pseudo_view_poses(config, scene)
-  pose_seconds = time.perf_counter() - t0
-  if config.use_masks:
-    pv, timing = masked_pseudo_views(config, scene, params, poses, show_progress, sigma_fn)
-  else:
-    pv, timing = render_pseudo_views(config, scene, params, poses, show_progress, render_fn)
-  timing['seconds'] = (pose_seconds + timing['render_seconds'] +
-                       timing.get('hessian_seconds', 0.))
-  return pv, timing, meta
-
-
-def masked_pseudo_views(config, scene, params, poses, show_progress=False, sigma_fn=None):
-  """Pseudo-views at `poses` with Laplace-uncertainty masks (pixels with U > mu masked).
-
-  Returns:
-    (PseudoViews with masks and uncertainty, timing: {'render_seconds': the wall time
-    of all but the Hessian pass, 'hessian_seconds': the pass's as sigma_fn reports
-    them, 'mu', 'kept_fraction'}).
-  """
-  from renerf_jax.uncertainty import masks as uncertainty_masks  # pylint: disable=g-import-not-at-top
-  t0 = time.perf_counter()
-  # The deformation grid spans the space the fields see: the contracted cube with
-  # Config.contraction (as Bayes' Rays does on unbounded scenes), else the scene box.
-  lo, hi = contraction.CONTRACTED_BOX if config.contraction else scene.bbox
-  rays = camera_rays(scene, None, poses)
-  train_rays = ray_pool(scene, scene.train_idx)['rays']
-  t_masks = time.perf_counter()
-  res = uncertainty_masks.compute_masks(config, params, train_rays, rays, np.asarray(lo),
-                                        np.asarray(hi), show_progress=show_progress,
-                                        sigma_fn=sigma_fn)
-  masks_wall = time.perf_counter() - t_masks
-  pv = PseudoViews(images=np.clip(res.rgb, 0., 1.), poses=np.asarray(poses),
-                   masks=np.asarray(res.mask, np.float32),
-                   uncertainty=np.asarray(res.uncertainty, np.float32))
-  render_seconds = time.perf_counter() - t0 - masks_wall + res.render_seconds
-  return pv, {'render_seconds': render_seconds, 'hessian_seconds': res.hessian_seconds,
-              'mu': float(res.mu), 'kept_fraction': float(np.mean(pv.masks))}
-
-
 def round_step(config, scene, state: RoundState, show_progress: bool = False,
                synthesize_fn: Optional[Callable] = None,
                train_fn: Optional[Callable] = None,
@@ -176,7 +76,6 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
   Returns:
     RoundState of round state.round_index + 1.
   """
-  from renerf_jax import backbones  # pylint: disable=g-import-not-at-top  (it imports us)
   backbone = backbones.get_backbone(config)
   synthesize_fn = synthesize_fn or backbone.synthesize
   train_fn = train_fn or (lambda cfg, sc, pseudo, **kw: backbone.train(cfg, sc, None,

@@ -102,11 +102,12 @@ def load_round_params(config, rdir, r):
 # ------------------------------------------------------------------ the round driver
 
 
-def stored_synthesis(out_dir, synthesize_fn: Callable = renerf.synthesize) -> Callable:
-  """synthesize_fn with its result kept in out_dir: a resumed round reuses it.
+def stored_synthesis(out_dir, synthesize_fn: Optional[Callable] = None) -> Callable:
+  """synthesize_fn (default: the Config's Backbone.synthesize) with its result kept in
+  out_dir: a resumed round reuses it.
 
   Returns:
-    A function like renerf.synthesize.
+    A function like Backbone.synthesize.
   """
   def fn(config, scene, params, show_progress=False):
     pv = load_pseudo_views(out_dir)
@@ -114,7 +115,8 @@ def stored_synthesis(out_dir, synthesize_fn: Callable = renerf.synthesize) -> Ca
     if pv is not None and os.path.isfile(info_path):
       return pv, report.read_json(info_path), report.read_json(
           rundir.views_json_path(out_dir))
-    pv, timing, meta = synthesize_fn(config, scene, params, show_progress)
+    fn_ = synthesize_fn or backbones.get_backbone(config).synthesize
+    pv, timing, meta = fn_(config, scene, params, show_progress)
     if distributed.is_writer():
       save_pseudo_views(out_dir, pv, meta)
       report.write_json(info_path, timing)  # Last: it marks the pseudo-views as complete.

@@ -21,7 +21,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from renerf_jax.model import colour_levels, render_rays
+from renerf_jax.nerf.model import colour_levels, render_rays
 from renerf_jax.uncertainty.deformation import grid_size, make_warp
 
 

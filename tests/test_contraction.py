@@ -1,10 +1,11 @@
-"""Scene contraction and disparity spacing (renerf_jax/contraction.py)."""
+"""Scene contraction and disparity spacing (renerf_jax/nerf/contraction.py)."""
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from renerf_jax import contraction
+from renerf_jax.nerf import contraction
+from renerf_jax.nerf import synthesis
 
 
 def _dirs(n, seed=0):
@@ -92,9 +93,10 @@ def test_renderer_gives_the_fields_contracted_samples_out_to_the_far_shell():
   hook, Bayes' Rays' deformation) inside radius 2, a ray to 1000 units reaches the far
   shell, and the render stays finite; with NDC the setting is refused in one line."""
   from conftest import tiny_config  # pylint: disable=g-import-not-at-top
-  from renerf_jax import cameras, training  # pylint: disable=g-import-not-at-top
+  from renerf_jax import cameras  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf import training  # pylint: disable=g-import-not-at-top
   from renerf_jax.errors import ConfigError  # pylint: disable=g-import-not-at-top
-  from renerf_jax.model import render_rays  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf.model import render_rays  # pylint: disable=g-import-not-at-top
   for kind, norm, extra in (
       ('l2', lambda m: jnp.linalg.norm(m, axis=-1), dict(lindisp=True)),
       ('inf', lambda m: jnp.max(jnp.abs(m), axis=-1),  # the density-only proposal level
@@ -130,7 +132,6 @@ def test_laplace_deformation_grid_spans_the_space_the_fields_see(monkeypatch):
   """With Config.contraction the Bayes' Rays deformation grid covers the contracted
   cube (where the offsets act), else the scene's box."""
   from conftest import tiny_config  # pylint: disable=g-import-not-at-top
-  from renerf_jax import renerf  # pylint: disable=g-import-not-at-top
   from renerf_jax.uncertainty import masks as uncertainty_masks  # pylint: disable=g-import-not-at-top
   from renerf_jax.datasets import load_scene  # pylint: disable=g-import-not-at-top
   seen = []
@@ -143,7 +144,7 @@ def test_laplace_deformation_grid_spans_the_space_the_fields_see(monkeypatch):
     cfg = tiny_config(use_ndc=False, contraction=kind)
     scene = load_scene(cfg)
     with pytest.raises(StopIteration):
-      renerf.masked_pseudo_views(cfg, scene, None, scene.poses[:1])
+      synthesis.masked_pseudo_views(cfg, scene, None, scene.poses[:1])
   assert seen[0] == contraction.CONTRACTED_BOX
   assert seen[1] == tuple(tuple(float(v) for v in b) for b in scene.bbox)
   assert seen[1] != seen[0]

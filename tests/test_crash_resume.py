@@ -10,7 +10,7 @@ write), and is then rerun until it finishes. Every kill is a SIGKILL the process
 itself from a wrapped function (os.replace, or the n-th call of a library function), so
 it hits a known point whatever the machine's speed: no polling, no sleeps.
 
-Determinism that the comparison relies on (renerf_jax.training.train_model): step s uses
+Determinism that the comparison relies on (renerf_jax.nerf.training.train_model): step s uses
 the key fold_in(PRNGKey(seed), s) whether or not the run was resumed, a checkpoint holds
 the whole TrainState (params, Adam state, step, nan_skips) bit for bit, pseudo-views are
 cached losslessly (float32 in views.npz) and everything else (scene, pools, random

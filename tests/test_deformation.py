@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from tiny_scene import take, tiny_setup
 
-from renerf_jax.model import render_rays
+from renerf_jax.nerf.model import render_rays
 from renerf_jax.uncertainty import deformation
 
 

@@ -6,12 +6,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from renerf_jax import regularizers, training
+from renerf_jax.nerf import regularizers, training
 from renerf_jax.configs import Config
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.errors import ConfigError
-from renerf_jax.model import render_rays
-from renerf_jax.renerf import regularizer_poses
+from renerf_jax.nerf.model import render_rays
+from renerf_jax.nerf.pools import regularizer_poses
 from conftest import tiny_config
 
 

@@ -7,11 +7,11 @@ import sys
 import numpy as np
 import pytest
 
-from renerf_jax import training
+from renerf_jax.nerf import training
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax.evaluation import evaluate_test_views
-from renerf_jax.renerf import make_pools
+from renerf_jax.nerf.evaluation import evaluate_test_views
+from renerf_jax.nerf.pools import make_pools
 from renerf_jax.round_driver import save_evaluation
 from conftest import LLFF_DIR, REPO
 

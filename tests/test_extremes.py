@@ -22,12 +22,14 @@ import numpy as np
 import pytest
 from conftest import REPO, tiny_config
 
-from renerf_jax import cameras, mip, renerf, round_driver
+from renerf_jax import cameras, renerf, round_driver
+from renerf_jax.nerf import mip
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.errors import ConfigError
-from renerf_jax.fields import init_field_params
-from renerf_jax.model import render_rays
+from renerf_jax.nerf.fields import init_field_params
+from renerf_jax.nerf.model import render_rays
 from renerf_jax.pseudo_views import pseudo_view_poses
+from renerf_jax.nerf import pools
 
 
 def _all_finite(tree):
@@ -259,7 +261,7 @@ def test_two_identical_cameras_train_finite_through_a_round():
   config = tiny_config(n_input_views=2, num_rounds=1, max_steps=8, pseudo_until_frac=1.,
                        eval_every=4, lpips_nets=())
   scene = _identical_cameras_scene(config)
-  poses = renerf.regularizer_poses(config, scene)
+  poses = pools.regularizer_poses(config, scene)
   assert _all_finite(poses)
   np.testing.assert_allclose(np.linalg.det(np.asarray(poses[:, :, :3], np.float64)), 1.,
                              atol=1e-5)

@@ -1,17 +1,18 @@
-"""Tests for renerf_jax.fields.grid (multi-resolution grid field)."""
+"""Tests for renerf_jax.nerf.fields.grid (multi-resolution grid field)."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from renerf_jax import metrics, mip, training
+from renerf_jax import metrics
+from renerf_jax.nerf import mip, training
 from renerf_jax.configs import Config
 from renerf_jax.datasets import load_scene, ray_pool
-from renerf_jax.fields import init_field_params, make_field
-from renerf_jax.fields import grid
-from renerf_jax.fields.grid import GridField
-from renerf_jax.model import render_rays
+from renerf_jax.nerf.fields import init_field_params, make_field
+from renerf_jax.nerf.fields import grid
+from renerf_jax.nerf.fields.grid import GridField
+from renerf_jax.nerf.model import render_rays
 
 # A small grid: resolutions (4, 8, 16, 32); with 2^12 entries the first two levels are
 # dense (125, 729 vertices) and the last two hashed (4913, 35937 > 4096).

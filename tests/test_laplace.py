@@ -10,7 +10,7 @@ from dense_reference import (gn_hessian_diagonal, reference_hessian_diagonals,
                              true_hessian_diagonal)
 from tiny_scene import LAM, take, tiny_setup
 
-from renerf_jax.model import render_rays
+from renerf_jax.nerf.model import render_rays
 from renerf_jax.uncertainty import laplace
 from renerf_jax.uncertainty import masks as uncertainty_masks
 from renerf_jax.uncertainty.deformation import trilinear_corners

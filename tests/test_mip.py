@@ -3,7 +3,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from renerf_jax import mip
+from renerf_jax.nerf import mip
 
 
 def test_ipe_matches_monte_carlo_expectation_of_sin():

@@ -3,7 +3,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax.model import materialize
+from renerf_jax.nerf.model import materialize
 
 
 def test_materialize_is_the_identity_on_extreme_values():
@@ -30,9 +30,9 @@ def test_materialize_changes_no_compiled_result(monkeypatch):
   """Inside a compiled step the helper only moves a fusion boundary: same values."""
   # pylint: disable=g-import-not-at-top
   from conftest import tiny_config
-  from renerf_jax import model
+  from renerf_jax.nerf import model
   from renerf_jax.datasets import load_scene, ray_pool
-  from renerf_jax.fields import init_field_params
+  from renerf_jax.nerf.fields import init_field_params
   # pylint: enable=g-import-not-at-top
   with_it = jax.jit(lambda v: materialize(v * 2.) + 1.)
   without = jax.jit(lambda v: v * 2. + 1.)
@@ -71,8 +71,9 @@ def test_outside_box_empty_leaves_no_weight_outside_the_box():
   while 'clamp' (the default) gives them the faces' density; inside, the two agree."""
   # pylint: disable=g-import-not-at-top
   from conftest import tiny_config
-  from renerf_jax import cameras, model
-  from renerf_jax.fields import init_field_params
+  from renerf_jax import cameras
+  from renerf_jax.nerf import model
+  from renerf_jax.nerf.fields import init_field_params
   # pylint: enable=g-import-not-at-top
   box = ((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5))
   kw = dict(field='grid', grid_levels=2, grid_max_res=8, grid_base_res=4, use_ndc=False,

@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 from dense_reference import reference_hessian_diagonals
 
-from renerf_jax import cameras, model, training
+from renerf_jax import cameras
+from renerf_jax.nerf import model, training
 from renerf_jax.configs import Config
 from renerf_jax.datasets import load_scene
 from renerf_jax.datasets.scene import ray_pool
 from renerf_jax.errors import ConfigError
-from renerf_jax.fields import init_field_params
-from renerf_jax.fields.proposal import interlevel_loss, outer_weights
+from renerf_jax.nerf.fields import init_field_params
+from renerf_jax.nerf.fields.proposal import interlevel_loss, outer_weights
 from renerf_jax.uncertainty import laplace
 
 
@@ -110,7 +111,7 @@ def test_level_samples_and_labels():
 
 def test_default_sampler_keeps_the_field_parameters():
   """Without the proposal the parameters are the field's own init from the same key."""
-  from renerf_jax.fields import make_field  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf.fields import make_field  # pylint: disable=g-import-not-at-top
   config = Config(field='grid', grid_levels=4, grid_max_res=32, grid_log2_hashmap_size=12)
   key = jax.random.PRNGKey(3)
   means = jnp.zeros((1, 2, 3))

@@ -5,9 +5,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from renerf_jax import regularizers, training
+from renerf_jax.nerf import regularizers, training
 from renerf_jax.datasets import load_scene, ray_pool
-from renerf_jax.renerf import regularizer_poses
+from renerf_jax.nerf.pools import regularizer_poses
+from renerf_jax.nerf import pools as nerf_pools
 from conftest import tiny_config
 
 
@@ -129,16 +130,15 @@ def test_near_camera_loss_in_training_reaches_the_loss_and_trains():
   """Off: no statistic and no pool. On: the loss grows by mult x the statistic, and a few
   steps train with finite losses; NDC configs refuse it in one line."""
   import dataclasses  # pylint: disable=g-import-not-at-top
-  from renerf_jax import renerf  # pylint: disable=g-import-not-at-top
   from renerf_jax.configs import Config  # pylint: disable=g-import-not-at-top
   from renerf_jax.errors import ConfigError  # pylint: disable=g-import-not-at-top
   config = tiny_config(use_ndc=False, near=0.05, far=6., depth_tv_loss_mult=0.,
                        anneal_nearfar=False, max_steps=6)
   scene = load_scene(config)
-  assert 'camera_centres' not in renerf.make_pools(config, scene, None)
+  assert 'camera_centres' not in nerf_pools.make_pools(config, scene, None)
   # The embedded scene starts its rays 1.2 from the camera: a radius of 1.6 reaches them.
   on_cfg = dataclasses.replace(config, near_camera_loss_mult=2., near_camera_radius=1.6)
-  pools = renerf.make_pools(on_cfg, scene, None)
+  pools = nerf_pools.make_pools(on_cfg, scene, None)
   np.testing.assert_allclose(pools['camera_centres'],
                              scene.poses[scene.train_idx][:, :3, 3], atol=1e-6)
   cam = training.Camera.of(scene)

@@ -7,7 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from renerf_jax import fit, rundir, training
+from renerf_jax import fit, rundir
+from renerf_jax.nerf import training
 from renerf_jax.datasets import load_scene, ray_pool
 from renerf_jax.errors import ConfigError
 from conftest import REPO, tiny_config
@@ -137,7 +138,8 @@ def test_train_model_resumes_from_a_mid_run_checkpoint(tmp_path, monkeypatch):
 _SHARD_SCRIPT = r'''
 import jax, numpy as np
 from conftest import tiny_config
-from renerf_jax import fit, rundir, training
+from renerf_jax import fit, rundir
+from renerf_jax.nerf import training
 from renerf_jax.datasets import load_scene, ray_pool
 config = tiny_config(depth_tv_loss_mult=0., anneal_nearfar=False, density_noise=0.)
 scene = load_scene(config)
@@ -171,7 +173,7 @@ def test_pseudo_windows_of_the_ablation_schedules(schedule, window):
 
 
 def test_trunc_exp_value_clipped_gradient_and_huge_inputs():
-  from renerf_jax.model import raw_to_outputs, trunc_exp
+  from renerf_jax.nerf.model import raw_to_outputs, trunc_exp
   x = jnp.array([-30., 0., 2., 20., 1e10])
   y = np.asarray(trunc_exp(x))
   assert np.all(np.isfinite(y))
@@ -199,7 +201,7 @@ def test_train_model_compiles_the_step_once(tmp_path):
 def _pseudo_pools(config, usable):
   """Pools of the tiny scene with 4 pseudo-views whose masked pixels have colour 7."""
   from renerf_jax.pseudo_views import PseudoViews  # pylint: disable=g-import-not-at-top
-  from renerf_jax.renerf import make_pools  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf.pools import make_pools  # pylint: disable=g-import-not-at-top
   scene = load_scene(config)
   m, h, w = 4, scene.height, scene.width
   rng = np.random.default_rng(0)

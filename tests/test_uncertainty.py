@@ -7,7 +7,7 @@ import pytest
 from tiny_scene import LAM, take, tiny_setup
 
 from renerf_jax.configs import Config
-from renerf_jax.rendering import render_flat
+from renerf_jax.nerf.rendering import render_flat
 from renerf_jax.uncertainty import laplace
 from renerf_jax.uncertainty import masks as unc
 

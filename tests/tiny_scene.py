@@ -4,7 +4,7 @@ import numpy as np
 
 from renerf_jax.configs import Config
 from renerf_jax.datasets import load_scene, ray_pool
-from renerf_jax.fields import init_field_params
+from renerf_jax.nerf.fields import init_field_params
 
 LAM = 1e-4
 TINY = Config(dataset_loader='procedural', num_samples=8, net_depth=2, net_width=32,

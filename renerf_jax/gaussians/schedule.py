@@ -7,7 +7,7 @@ so a short run keeps the reference's proportions.
 import jax.numpy as jnp
 import optax
 
-from renerf_jax import regularizers
+from renerf_jax import schedules
 
 ADAM_EPS = 1e-15  # 3DGS's Adam epsilon.
 # Optimised fields: the Gaussians' float fields with the SH split into DC and the rest
@@ -18,7 +18,7 @@ FIELDS = ('means', 'log_scales', 'quats', 'opacity_logits', 'sh_dc', 'sh_rest')
 def means_lr(iteration, config, extent):
   """Position lr at a 1-based iteration: extent x log-linear gs_lr_means_init -> _final
   over max_steps (3DGS's get_expon_lr_func without delay)."""
-  return extent * regularizers.log_lerp(iteration, config.gs_lr_means_init,
+  return extent * schedules.log_lerp(iteration, config.gs_lr_means_init,
                                         config.gs_lr_means_final, config.max_steps)
 
 

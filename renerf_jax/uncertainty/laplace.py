@@ -26,8 +26,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import distributed, mip
-from renerf_jax.model import colour_levels, render_rays
+from renerf_jax import distributed
+from renerf_jax.nerf import mip
+from renerf_jax.nerf.model import colour_levels, render_rays
 from renerf_jax.progress import progress_bar
 from renerf_jax.uncertainty.deformation import grid_size, trilinear_corners
 

@@ -23,10 +23,11 @@ import jax.numpy as jnp
 import jaxopt
 import numpy as np
 
-from renerf_jax import distributed, mip
-from renerf_jax.model import materialize, render_rays
+from renerf_jax import distributed
+from renerf_jax.nerf import mip
+from renerf_jax.nerf.model import materialize, render_rays
 from renerf_jax.progress import progress_bar
-from renerf_jax.rendering import render_flat
+from renerf_jax.nerf.rendering import render_flat
 from renerf_jax.uncertainty import laplace
 from renerf_jax.uncertainty import signals as sig
 from renerf_jax.uncertainty.deformation import trilinear

@@ -34,9 +34,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import mip
-from renerf_jax.model import materialize, render_rays
-from renerf_jax.rendering import render_flat
+from renerf_jax.nerf import mip
+from renerf_jax.nerf.model import materialize, render_rays
+from renerf_jax.nerf.rendering import render_flat
 from renerf_jax.uncertainty import laplace
 from renerf_jax.uncertainty.deformation import cells_of, trilinear, trilinear_corners
 

@@ -19,7 +19,7 @@ no AVX-512, so YNNPACK takes the same kernels as on an AVX2-only machine.
 `old`: the reference as it was (jax.hessian = forward over reverse); `new`: the production
 Hessian pass (laplace.hessian_diagonal) and the forward-mode reference of
 tests/dense_reference.py on 64 rays, then the demo's Laplace-mask path
-(renerf.synthesize with Config.mask_signal = 'laplace', 2048 Hessian rays, 2 views).
+(synthesis.synthesize with Config.mask_signal = 'laplace', 2048 Hessian rays, 2 views).
 """
 import dataclasses
 import os
@@ -39,13 +39,14 @@ sys.path.insert(0, os.path.join(REPO, 'tests'))
 import dense_reference
 from test_proposal import COVER
 
-from renerf_jax import renerf, training
+from renerf_jax.nerf import training
 from renerf_jax.configs import Config, load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.datasets.scene import ray_pool
-from renerf_jax.fields import init_field_params
+from renerf_jax.nerf.fields import init_field_params
 from renerf_jax.uncertainty import laplace
 from renerf_jax.uncertainty.deformation import grid_size
+from renerf_jax.nerf import synthesis
 
 STEPS = 800
 
@@ -94,7 +95,7 @@ def main(which, path):
       'Config.use_masks = True', "Config.mask_signal = 'laplace'",
       'Config.hessian_rays = 2048', "Config.interp_factors = '0.5'"])
   demo_scene = load_scene(demo)
-  pv, _, _ = renerf.synthesize(demo, demo_scene, training.init_state(
+  pv, _, _ = synthesis.synthesize(demo, demo_scene, training.init_state(
       demo, jax.random.PRNGKey(0)).params)
   print(f'demo Laplace-mask path ok ({time.time() - t:.0f} s), {pv.images.shape[0]} views, '
         f'kept {np.mean(pv.masks):.3f}', flush=True)

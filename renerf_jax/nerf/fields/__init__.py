@@ -2,20 +2,20 @@
 import jax
 import jax.numpy as jnp
 
-from renerf_jax import mip
+from renerf_jax.nerf import mip
 
 
 def make_field(config):
   """The flax module selected by `config.field` (built from static config only)."""
   if config.field == 'mlp':
-    from renerf_jax.fields.mlp import MipMLP  # pylint: disable=g-import-not-at-top
+    from renerf_jax.nerf.fields.mlp import MipMLP  # pylint: disable=g-import-not-at-top
     return MipMLP(net_depth=config.net_depth, net_width=config.net_width,
                   skip_layer=config.skip_layer, net_depth_viewdirs=config.net_depth_viewdirs,
                   net_width_viewdirs=config.net_width_viewdirs,
                   min_deg_point=config.min_deg_point, max_deg_point=config.max_deg_point,
                   deg_view=config.deg_view, use_viewdirs=config.use_viewdirs)
   if config.field == 'grid':
-    from renerf_jax.fields.grid import GridField  # pylint: disable=g-import-not-at-top
+    from renerf_jax.nerf.fields.grid import GridField  # pylint: disable=g-import-not-at-top
     return GridField(num_levels=config.grid_levels, base_res=config.grid_base_res,
                      max_res=config.grid_max_res, num_features=config.grid_features,
                      log2_hashmap_size=config.grid_log2_hashmap_size,
@@ -52,6 +52,6 @@ def init_field_params(config, key):
     return init(key)
   k_field, k_prop = jax.random.split(key)
   params = init(k_field)
-  from renerf_jax.fields.proposal import make_proposal  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf.fields.proposal import make_proposal  # pylint: disable=g-import-not-at-top
   return {'params': params['params'],
           'proposal': make_proposal(config).init(k_prop, means)['params']}

@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import mip
+from renerf_jax.nerf import mip
 
 # Instant-NGP's hash primes (the first is 1: x is used as is).
 HASH_PRIMES = (1, 2654435761, 805459861)

@@ -13,7 +13,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from renerf_jax.fields.grid import grid_features, grid_layout
+from renerf_jax.nerf.fields.grid import grid_features, grid_layout
 
 
 class ProposalGrid(nn.Module):

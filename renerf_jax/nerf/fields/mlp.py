@@ -5,7 +5,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from renerf_jax import mip
+from renerf_jax.nerf import mip
 
 
 class MipMLP(nn.Module):

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from renerf_jax import contraction
+from renerf_jax.nerf import contraction
 
 _TINY = 1e-10
 

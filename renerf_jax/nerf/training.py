@@ -15,10 +15,11 @@ import numpy as np
 import optax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from renerf_jax import cameras, distributed, fit, metrics, regularizers
-from renerf_jax.fields import frequency_mask, init_field_params
-from renerf_jax.fields.proposal import interlevel_loss
-from renerf_jax.model import colour_levels, render_rays
+from renerf_jax import cameras, distributed, fit, metrics, schedules
+from renerf_jax.nerf import regularizers
+from renerf_jax.nerf.fields import frequency_mask, init_field_params
+from renerf_jax.nerf.fields.proposal import interlevel_loss
+from renerf_jax.nerf.model import colour_levels, render_rays
 
 
 @flax.struct.dataclass
@@ -59,9 +60,9 @@ def learning_rate(step, config):
     delay = 1.
   if config.lr_decay_start_frac > 0:  # Static: the default traces the plain schedule.
     start = config.lr_decay_start_frac * config.max_steps
-    return delay * regularizers.log_lerp(jnp.maximum(step - start, 0.), config.lr_init,
+    return delay * schedules.log_lerp(jnp.maximum(step - start, 0.), config.lr_init,
                                          config.lr_final, config.max_steps - start)
-  return delay * regularizers.log_lerp(step, config.lr_init, config.lr_final,
+  return delay * schedules.log_lerp(step, config.lr_init, config.lr_final,
                                        config.max_steps)
 
 

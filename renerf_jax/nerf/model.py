@@ -4,9 +4,9 @@ from typing import Callable, List, Optional
 import jax
 import jax.numpy as jnp
 
-from renerf_jax import contraction, mip
-from renerf_jax.fields import make_field
-from renerf_jax.fields.proposal import make_proposal
+from renerf_jax.nerf import contraction, mip
+from renerf_jax.nerf.fields import make_field
+from renerf_jax.nerf.fields.proposal import make_proposal
 
 # Per-level sample offsets: (level, means [B, S, 3]) -> offsets [B, S, 3].
 OffsetFn = Callable[[int, jnp.ndarray], jnp.ndarray]

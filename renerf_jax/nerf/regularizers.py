@@ -9,11 +9,7 @@ loss is left out: it is off in llff3.gin and its flow model was never released.
 """
 import jax.numpy as jnp
 
-
-def log_lerp(step, start, end, max_steps):
-  """exp((1 - t) log(start) + t log(end)), t = clip(step / max_steps, 0, 1)."""
-  t = jnp.clip(step / max(max_steps, 1), 0., 1.)
-  return jnp.exp(jnp.log(start) * (1. - t) + jnp.log(end) * t)
+from renerf_jax.schedules import log_lerp
 
 
 def depth_tv_weight(step, mult_start, mult_end, maxstep):

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from renerf_jax import distributed
-from renerf_jax.model import render_rays
+from renerf_jax.nerf.model import render_rays
 from renerf_jax.progress import progress_bar
 
 
