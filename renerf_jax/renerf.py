@@ -69,7 +69,7 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
     synthesize_fn: (config, scene, params, show_progress) -> (PseudoViews, timing, meta).
     train_fn: (config, scene, pseudo: PseudoViews or None, **kwargs) ->
       fit.TrainResult (kwargs: window, init_params, eval_fn, time_offset, desc,
-      show_progress, as training.train_model takes them).
+      show_progress, as nerf.training.train_model takes them).
     evaluate_fn: (config, scene, params) -> evaluation.Evaluation.
     round_driver.py binds them to a round directory.
 

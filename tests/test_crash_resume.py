@@ -166,7 +166,7 @@ def test_sigkill_at_any_moment_then_rerun_matches_uninterrupted_run(tmp_path, st
 
   # (c) Killed while rendering round 1's pseudo-views (round 0 is DONE by then), as the
   # second view starts.
-  proc = start(run, 'c.err', kill_at_call='renerf_jax.pseudo_views:render_flat:2')
+  proc = start(run, 'c.err', kill_at_call='renerf_jax.nerf.synthesis:render_flat:2')
   assert _killed(proc), _read(tmp_path / 'c.err')[-2000:]
   assert 'pseudo-views (' in _read(tmp_path / 'c.err')
   assert (r0 / 'DONE').exists()

@@ -88,7 +88,7 @@ def test_copy_baseline_shares_round_0_between_variants_only(tmp_path):
 
 
 def test_overlapping_view_sets_render_each_view_once_with_identical_pixels(monkeypatch):
-  from renerf_jax import pseudo_views as pv_lib  # pylint: disable=g-import-not-at-top
+  from renerf_jax.nerf import synthesis as pv_lib  # pylint: disable=g-import-not-at-top
   from renerf_jax.nerf import training  # pylint: disable=g-import-not-at-top
   cache = sharing.ViewCache()
   calls = []
