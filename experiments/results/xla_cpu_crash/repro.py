@@ -5,15 +5,19 @@ kernels are picked at run time from the CPU's own feature flags: `--xla_cpu_max_
 does not reach them. Under valgrind the program sees valgrind's virtual CPU, which has
 no AVX-512, so YNNPACK takes the same kernels as on an AVX2-only machine.
 
+  # From the repository root; PYTHONPATH=tests finds the test helpers it reuses, and
+  # YNN=... turns XLA:CPU's YNNPACK fusions back on (renerf_jax turns them off on import
+  # since the second crash, renerf_jax/xla_cpu.py; jaxlib 0.10.2's default is this value):
+  YNN=--xla_cpu_experimental_ynn_fusion_type=individual_dot
   # 1. natively: train the proposal-sampler model of tests/test_proposal.py (800 steps)
-  python experiments/results/xla_cpu_crash/repro.py train /tmp/xla_crash_params.pkl
+  PYTHONPATH=tests python experiments/results/xla_cpu_crash/repro.py train /tmp/xla_crash_params.pkl
   # 2. under valgrind, one graph per process (about 5-15 minutes each on one core):
-  PYTHONMALLOC=malloc valgrind --log-file=vg_old.log \
+  XLA_FLAGS=$YNN PYTHONPATH=tests PYTHONMALLOC=malloc valgrind --log-file=vg_old.log \
     python experiments/results/xla_cpu_crash/repro.py old /tmp/xla_crash_params.pkl
-  XLA_FLAGS=--xla_cpu_experimental_ynn_fusion_type= PYTHONMALLOC=malloc \
+  XLA_FLAGS=--xla_cpu_experimental_ynn_fusion_type= PYTHONPATH=tests PYTHONMALLOC=malloc \
     valgrind --log-file=vg_old_noynn.log \
     python experiments/results/xla_cpu_crash/repro.py old /tmp/xla_crash_params.pkl
-  PYTHONMALLOC=malloc valgrind --log-file=vg_new.log \
+  XLA_FLAGS=$YNN PYTHONPATH=tests PYTHONMALLOC=malloc valgrind --log-file=vg_new.log \
     python experiments/results/xla_cpu_crash/repro.py new /tmp/xla_crash_params.pkl
 
 `old`: the reference as it was (jax.hessian = forward over reverse); `new`: the production
@@ -31,22 +35,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(
-    os.path.abspath(__file__)))))
-sys.path.insert(0, REPO)
-sys.path.insert(0, os.path.join(REPO, 'tests'))
-# pylint: disable=g-import-not-at-top,wrong-import-position
-import dense_reference
+import dense_reference  # tests/ (PYTHONPATH=tests)
 from test_proposal import COVER
 
-from renerf_jax.nerf import training
 from renerf_jax.configs import Config, load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.datasets.scene import ray_pool
+from renerf_jax.nerf import synthesis, training
 from renerf_jax.nerf.fields import init_field_params
 from renerf_jax.uncertainty import laplace
 from renerf_jax.uncertainty.deformation import grid_size
-from renerf_jax.nerf import synthesis
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(
+    os.path.abspath(__file__)))))
 
 STEPS = 800
 
