@@ -5,7 +5,7 @@ python -m benchmarks.bench_ynn --configs experiments/configs/table_tiny.gin \
 
 Runs benchmarks/bench_throughput.py (train and render stages) in a fresh process per
 setting, since XLA reads its flags once per process: 'off' (the project's default,
---xla_cpu_experimental_ynn_fusion_type=) and 'on' (=individual_dot, jaxlib 0.10.2's own
+--xla_cpu_experimental_ynn_fusion_type=) and 'on' (=individual_dot,reduce, jaxlib 0.10.2's own
 default), alternating --rounds times so that a drift in the machine's load falls on
 both. Reports each setting's median rays/s and off / on. Run it on an idle machine.
 """
@@ -23,7 +23,7 @@ from renerf_jax import report
 from renerf_jax.xla_cpu import FLAG
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SETTINGS = {'off': f'{FLAG}=', 'on': f'{FLAG}=individual_dot'}
+SETTINGS = {'off': f'{FLAG}=', 'on': f'{FLAG}=individual_dot,reduce'}
 
 
 def run_setting(flags, configs, stages, repeats):

@@ -15,7 +15,7 @@ XLA compiles the same operations itself; the results agree to float tolerance
 The flag must be in XLA_FLAGS before the CPU backend starts (the first computation),
 which importing renerf_jax first guarantees for the project's own entry points (train.py,
 eval.py, the experiments, the tests). A user who wants the fusions back sets
-XLA_FLAGS=--xla_cpu_experimental_ynn_fusion_type=individual_dot (jaxlib 0.10.2's
+XLA_FLAGS=--xla_cpu_experimental_ynn_fusion_type=individual_dot,reduce (jaxlib 0.10.2's
 default) or any other value: a value already in XLA_FLAGS is never overridden.
 """
 import os

@@ -8,7 +8,7 @@ no AVX-512, so YNNPACK takes the same kernels as on an AVX2-only machine.
   # From the repository root; PYTHONPATH=tests finds the test helpers it reuses, and
   # YNN=... turns XLA:CPU's YNNPACK fusions back on (renerf_jax turns them off on import
   # since the second crash, renerf_jax/xla_cpu.py; jaxlib 0.10.2's default is this value):
-  YNN=--xla_cpu_experimental_ynn_fusion_type=individual_dot
+  YNN=--xla_cpu_experimental_ynn_fusion_type=individual_dot,reduce
   # 1. natively: train the proposal-sampler model of tests/test_proposal.py (800 steps)
   PYTHONPATH=tests python experiments/results/xla_cpu_crash/repro.py train /tmp/xla_crash_params.pkl
   # 2. under valgrind, one graph per process (about 5-15 minutes each on one core):
