@@ -191,8 +191,7 @@ def run_rounds(config, scene, run_dir, show_progress=True,
     train_dir, eval_dir = rundir.train_dir(rdir), rundir.eval_dir(rdir)
     state = renerf.round_step(
         config, scene, state, show_progress,
-        synthesize_fn=stored_synthesis(rundir.pseudo_views_dir(rdir),
-                                       synthesize_fn or backbone.synthesize),
+        synthesize_fn=stored_synthesis(rundir.pseudo_views_dir(rdir), synthesize_fn),
         train_fn=lambda cfg, sc, pseudo, **kw: backbone.train(cfg, sc, train_dir, pseudo,
                                                               **kw),
         evaluate_fn=stored_evaluation(
