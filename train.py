@@ -21,16 +21,26 @@ def main(argv=None):
     print(f'scene {scene.name}: {len(scene.train_idx)} train / {len(scene.test_idx)} test '
           f'views at {scene.width}x{scene.height}; run directory {run_dir}', file=sys.stderr)
   state = round_driver.run_rounds(config, scene, run_dir, show_progress=writer)
+  control = None
+  if config.seed_control and config.num_rounds:
+    control = round_driver.run_control(config, scene, run_dir, state, show_progress=writer)
   if not writer:
     return
-  table = rounds_table(state.metrics)
+  table = rounds_table(state.metrics, control)
   json_path, md_path = rundir.rounds_table_paths(run_dir)
   report.write_json(json_path, list(state.metrics))
-  deltas = deltas_vs_baseline(state.metrics)
+  deltas = deltas_vs_baseline(state.metrics, control)
   report.write_markdown(md_path, table + '\n' + ''.join(f'\n{d}\n' for d in deltas))
+  rows = [('B', rundir.round_dir(run_dir, 0))]
+  if control is not None:
+    rows.append(('control', rundir.round_dir(
+        run_dir if config.d_seed == 'same' else rundir.control_dir(run_dir), 0)))
+  rows += [(f'R{r}', rundir.round_dir(run_dir, r)) for r in range(1, config.num_rounds + 1)]
+  round_driver.save_comparison(run_dir, scene, rows)
   print(table)
   for line in deltas:
     print(line)
+  print(f'picture of test view 0 (photo, then each row): {rundir.comparison_path(run_dir)}')
 
 
 if __name__ == '__main__':

@@ -28,7 +28,7 @@ import numpy as np
 
 from benchmarks.ports import free_port
 
-NERF_CONFIGS = ('gin_configs/demo.gin', 'gin_configs/llff3_cpu.gin', 'gin_configs/llff3.gin',
+NERF_CONFIGS = ('gin_configs/demo_llff.gin', 'gin_configs/llff3_cpu.gin', 'gin_configs/llff3.gin',
                 'gin_configs/llff3_fast.gin')
 GAUSSIAN_CONFIGS = ('gin_configs/gaussians_llff3_cpu.gin', 'gin_configs/gaussians_llff3.gin')
 
@@ -176,7 +176,7 @@ def timed_run(args, n):
 
 def main():
   p = argparse.ArgumentParser(description=__doc__)
-  p.add_argument('--config', default='gin_configs/demo.gin')
+  p.add_argument('--config', default='gin_configs/demo_llff.gin')
   p.add_argument('--steps', type=int, default=30)
   p.add_argument('--warmup', type=int, default=3)
   p.add_argument('--out', default='experiments/results/multi_host/bench')

@@ -2,7 +2,7 @@
 
 python -m benchmarks.bench_viewer --out experiments/results/viewer/bench_viewer
 
-Trains the demo's baseline (`gin_configs/demo.gin`, --steps steps, a checkpoint every
+Trains the demo's baseline (`gin_configs/demo_llff.gin`, --steps steps, a checkpoint every
 --checkpoint_every) once per condition, each in a fresh run directory:
 - alone;
 - followed by the viewer (renerf_jax/viewer.py, "Follow training" on) with a headless
@@ -38,7 +38,7 @@ CONDITIONS = ('alone', 'viewer, camera still', 'viewer, orbiting', 'viewer, orbi
 
 def train_command(run_dir, args):
   return [sys.executable, os.path.join(REPO, 'train.py'),
-          '--gin_configs=' + os.path.join(REPO, 'gin_configs', 'demo.gin'),
+          '--gin_configs=' + os.path.join(REPO, 'gin_configs', 'demo_llff.gin'),
           '--gin_bindings=Config.num_rounds = 0',
           f'--gin_bindings=Config.max_steps = {args.steps}',
           f'--gin_bindings=Config.checkpoint_every = {args.checkpoint_every}',

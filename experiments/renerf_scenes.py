@@ -186,13 +186,6 @@ def pair_stats(pairs):
   return out
 
 
-def control_config(config, seed, steps):
-  """The seed-matched control of (config, seed): B's training (no rounds) with the Config
-  of D (renerf.round_config of round 1: D's seed and initialisation) for `steps` steps."""
-  d = renerf.round_config(dataclasses.replace(config, seed=seed), 1)
-  return dataclasses.replace(d, num_rounds=0, max_steps=steps)
-
-
 def finished_rounds(run_dir):
   """The rounds of a run whose every round is finished (read as it is: --no_r1 neither
   trains R1 nor rewrites such a run's config), else 0 (B alone)."""
@@ -248,7 +241,7 @@ def scene_runs(args, scene_name, base_bindings):
         # Its twin at B's seed: with Config.d_seed='same' the control is that run's B,
         # found by the sharing rules (the same baseline config) and copied, not trained.
         rows.setdefault(label, {})[seed] = run(
-            control_config(config, seed, steps), scene,
+            renerf.control_config(dataclasses.replace(config, seed=seed), steps), scene,
             os.path.join(root, label, f'seed{seed}'),
             [os.path.join(root, twin, f'seed{seed}')])[0]
   if rounds > 1:

@@ -49,9 +49,9 @@ def check_config(c):
   _check(c.backbone in ('nerf', 'gaussians'),
          f'Config.backbone={c.backbone!r} (nerf or gaussians)')
   check_backbone_fields(c)
-  _check(c.dataset_loader in ('llff', 'transforms', 'blender', 'procedural'),
-         f'Config.dataset_loader={c.dataset_loader!r} (llff, transforms, blender or '
-         'procedural)')
+  _check(c.dataset_loader in ('llff', 'transforms', 'blender', 'procedural', 'orbit'),
+         f'Config.dataset_loader={c.dataset_loader!r} (llff, transforms, blender, '
+         'procedural or orbit)')
   _check(c.test_stride >= 1, f'Config.test_stride={c.test_stride} must be >= 1')
   _check(c.blender_split in ('standard', 'linspace'),
          f'Config.blender_split={c.blender_split!r} (standard or linspace)')

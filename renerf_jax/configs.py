@@ -35,8 +35,9 @@ class Config:
   of each block, and a few shared fields sit inside a block of another concern.
   """
   # --- shared: data and split ---
-  # 'llff', 'transforms' (Instant-NGP / nerfstudio transforms.json), 'blender' or
-  # 'procedural' (the embedded scene).
+  # 'llff', 'transforms' (Instant-NGP / nerfstudio transforms.json), 'blender',
+  # 'procedural' (the embedded forward-facing scene) or 'orbit' (the embedded 360-degree
+  # scene).
   dataset_loader: str = shared('llff')
   # Folder that holds the scene folders (e.g. .../nerf_llff_data).
   data_dir: str = shared('')
@@ -74,8 +75,8 @@ class Config:
   # the modifier, and its run directory stays reusable): set the scene through gin or the
   # constructor, never with dataclasses.replace (the other scenes' pairs are gone).
   llff_min_near: Tuple[Tuple[str, float], ...] = shared(())
-  procedural_size: Tuple[int, int] = shared((48, 64))  # (H, W) of the embedded scene.
-  procedural_views: int = shared(17)  # Number of images the embedded scene renders.
+  procedural_size: Tuple[int, int] = shared((48, 64))  # (H, W) of an embedded scene.
+  procedural_views: int = shared(17)  # Number of images an embedded scene renders.
   # --- shared: seeds and steps ---
   # Seeds the per-step draws (rays, sample jitter, density noise, the Gaussians' image
   # draws) and, unless init_seed >= 0, the parameters' initialisation.
@@ -229,6 +230,9 @@ class Config:
   interlevel_loss_mult: float = nerf(1.)  # Weight of the proposal's interlevel loss.
   # --- Re-Nerfing: rounds, D's training, pseudo-views ---
   num_rounds: int = renerf(0, 'rounds')  # Rounds after the baseline (0: baseline only).
+  # train.py also trains round 1's seed-matched control (renerf.control_config: B's
+  # training at D's seed, no pseudo-views) in <run>/control/ and reports R1 against it.
+  seed_control: bool = renerf(False, 'rounds')
   # How D draws rays while the pseudo-views are on (NeRF: the Gaussians draw whole
   # images, real and pseudo alike): 'pixels' (the paper: they are "part of the training
   # images": rays uniform over every usable pixel of the real and the pseudo-views

@@ -99,6 +99,23 @@ def plot_metrics_vs_time(curves_by_metric: Mapping[str, Mapping[str, Curve]],
   save_figure(fig, path)
 
 
+def save_panels(path, images, titles, panel_inches=2.4):
+  """Images side by side, each under its title, as one PNG (atomically).
+
+  Args:
+    path: destination file. images: [H, W, 3] floats in [0, 1] or uint8, same size.
+    titles: one string per image. panel_inches: the width of one panel.
+  """
+  h, w = np.asarray(images[0]).shape[:2]
+  fig, axes = subplots(1, len(images), (panel_inches * len(images),
+                                        panel_inches * h / w + 0.4))
+  for ax, img, title in zip(axes[0], images, titles):
+    ax.imshow(to_uint8(img), interpolation='nearest')
+    ax.set_title(title, fontsize=9)
+    ax.axis('off')
+  save_figure(fig, path)
+
+
 def to_uint8(img):
   """Converts a float image in [0, 1] to uint8 (uint8 input passes through).
 

@@ -18,6 +18,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from renerf_jax.errors import ConfigError
+
 # SSIM constants (Wang et al. 2004).
 SSIM_FILTER_SIZE = 11
 SSIM_FILTER_SIGMA = 1.5
@@ -176,6 +178,16 @@ def _lpips_net_name(net):
     return _LPIPS_NET_ALIASES[net.lower()]
   except KeyError:
     raise ValueError(f'Unknown LPIPS net {net!r}; use "alex" or "vgg".')
+
+
+def check_lpips_size(lpips_nets, height, width):
+  """Raises ConfigError when Config.lpips_nets asks for LPIPS-alex on images smaller
+  than LPIPS_ALEX_MIN_SIZE per side (before any training, not at the first evaluation)."""
+  if (any(_lpips_net_name(n) == 'alexnet' for n in lpips_nets)
+      and min(height, width) < LPIPS_ALEX_MIN_SIZE):
+    raise ConfigError(f'Config.lpips_nets={tuple(lpips_nets)!r}: LPIPS-alex needs images of '
+                      f'at least {LPIPS_ALEX_MIN_SIZE} px per side, the test views are '
+                      f'{width}x{height} (enlarge them or leave out alex)')
 
 
 @functools.lru_cache(maxsize=None)

@@ -18,7 +18,7 @@ from typing import Any, Callable, Optional, Tuple
 
 import flax
 
-from renerf_jax import backbones, fit, report
+from renerf_jax import backbones, fit, metrics, report
 from renerf_jax.errors import ConfigError
 from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses
 
@@ -52,6 +52,14 @@ def round_config(config, r):
   init = b_init if config.d_seed == 'same_init' else (
       config.init_seed + 1000 * r if config.init_seed >= 0 else -1)
   return dataclasses.replace(config, seed=config.seed + 1000 * r, init_seed=init)
+
+
+def control_config(config, steps=None):
+  """The seed-matched control of round 1 (issue 49): B's training (no rounds, no
+  pseudo-views) with D's Config (round_config(config, 1): D's seed and initialisation)
+  for `steps` steps (None: B's). It differs from R1 in the pseudo-views alone."""
+  return dataclasses.replace(round_config(config, 1), num_rounds=0, seed_control=False,
+                             max_steps=steps or config.max_steps)
 
 
 def round_step(config, scene, state: RoundState, show_progress: bool = False,
@@ -110,9 +118,10 @@ def check_rounds_config(config, scene):
   Without this, a single training view with interpolated pseudo-views (no neighbouring
   pair to interpolate), a bad Config.interp_factors or Config.pseudo_targets, or the
   oracle (Config.pseudo_source='photo') with masks, would only fail after the baseline
-  had trained. With num_rounds = 0 nothing is checked (the
-  baseline alone needs no pseudo-views).
+  had trained. With num_rounds = 0 only LPIPS-alex against the image size is checked
+  (the baseline alone needs no pseudo-views).
   """
+  metrics.check_lpips_size(config.lpips_nets, scene.height, scene.width)
   if config.num_rounds > 0:
     pseudo_view_poses(config, scene)
     if (config.backbone != 'nerf' and config.use_masks
@@ -131,10 +140,16 @@ def run_rounds(config, scene, show_progress: bool = False) -> RoundState:
   return state
 
 
-def rounds_table(metrics):
-  """Markdown table of per-round test metrics in the shape of the paper's 3-view table."""
+CONTROL_NAME = "control (D's seed, no pseudo-views)"
+
+
+def rounds_table(metrics, control=None):
+  """Markdown table of per-round test metrics in the shape of the paper's 3-view table
+  (the seed-matched control's metrics, when given, as a row after the baseline)."""
   rows = [dict(m, name='baseline' if m['round'] == 0 else f"Re-Nerfing R{m['round']}")
           for m in metrics]
+  if control is not None:
+    rows.insert(1, dict(control, name=CONTROL_NAME))
   cols = [('name', 'round'), ('psnr', 'PSNR'), ('ssim', 'SSIM'),
           ('lpips_alex', 'LPIPS-alex'), ('lpips_vgg', 'LPIPS-vgg'), ('avg_err', 'avg err'),
           ('cumulative_seconds', 'cum. time [s]')]
@@ -142,13 +157,30 @@ def rounds_table(metrics):
                                       any(c[0] in m for m in metrics)])
 
 
-def deltas_vs_baseline(metrics):
-  """One line per round r >= 1: its metrics minus the baseline's, whatever the sign."""
+def _delta(m, ref, label):
+  """'label: PSNR +x.xx, SSIM +x.xxx, LPIPS-alex +x.xxx (...)': m minus ref."""
+  parts = [f"{name} {m[k] - ref[k]:+.{d}f}" for k, name, d in
+           (('psnr', 'PSNR', 2), ('ssim', 'SSIM', 3), ('lpips_alex', 'LPIPS-alex', 3))
+           if k in m and k in ref]
+  return (f'{label}: ' + ', '.join(parts) + ' (PSNR in dB; higher PSNR / SSIM and lower '
+          'LPIPS are better)')
+
+
+def deltas_vs_baseline(metrics, control=None):
+  """One line per round r >= 1: its metrics minus the baseline's, whatever the sign.
+
+  With the seed-matched control's metrics (control_config), first R1 - control (the
+  verdict: the two differ in the pseudo-views alone), then the rounds - baseline, then
+  control - baseline (what D's seed alone moves), and one line saying what they mean.
+  """
   base, lines = metrics[0], []
+  if control is not None and len(metrics) > 1:
+    lines.append(_delta(metrics[1], control, 'R1 - control'))
   for m in metrics[1:]:
-    parts = [f"{name} {m[k] - base[k]:+.{d}f}" for k, name, d in
-             (('psnr', 'PSNR', 2), ('ssim', 'SSIM', 3), ('lpips_alex', 'LPIPS-alex', 3))
-             if k in m and k in base]
-    lines.append(f"R{m['round']} - baseline: " + ', '.join(parts) + ' (PSNR in dB; '
-                 'higher PSNR / SSIM and lower LPIPS are better)')
+    lines.append(_delta(m, base, f"R{m['round']} - baseline"))
+  if control is not None:
+    lines += [_delta(control, base, 'control - baseline'),
+              "R1 - control is Re-Nerfing's effect (same seed and steps, with against "
+              'without pseudo-views); control - baseline is what a change of seed alone '
+              'moves. One seed decides nothing: compare the spread over seeds.']
   return lines

@@ -6,6 +6,7 @@ files a round writes of its results (test evaluations, pseudo-views, parameters)
     train/          checkpoints/, log.jsonl                        (resume mid-round)
     eval/           test renders, metrics.json, metrics.md
     params.msgpack, result.json, DONE
+  runs/<name>/control/round_0/   the seed-matched control (Config.seed_control), alike
 
 A round marked DONE is loaded, never rewritten; an interrupted round resumes from what it
 left: its pseudo-views (if saved) and its last atomic checkpoint. Every write is atomic
@@ -15,7 +16,7 @@ reads what is on disk; process 0 alone writes. Evaluation, pseudo-view synthesis
 uncertainty return arrays and dicts; they are written here (and by eval.py) only.
 """
 import os
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 from flax import serialization
@@ -165,7 +166,8 @@ def load_round(config, rdir, state: renerf.RoundState) -> renerf.RoundState:
 
 
 def run_rounds(config, scene, run_dir, show_progress=True,
-               synthesize_fn: Optional[Callable] = None) -> renerf.RoundState:
+               synthesize_fn: Optional[Callable] = None,
+               label: Optional[str] = None) -> renerf.RoundState:
   """Baseline plus config.num_rounds rounds in run_dir, resuming what is there.
 
   Args:
@@ -173,6 +175,7 @@ def run_rounds(config, scene, run_dir, show_progress=True,
     show_progress: draw progress bars.
     synthesize_fn: the pseudo-view synthesis (None: the backbone's; experiments share
       work between table variants through it).
+    label: the progress bars' label (None: 'baseline', 'round r').
 
   Returns:
     RoundState after the last round.
@@ -192,10 +195,46 @@ def run_rounds(config, scene, run_dir, show_progress=True,
     state = renerf.round_step(
         config, scene, state, show_progress,
         synthesize_fn=stored_synthesis(rundir.pseudo_views_dir(rdir), synthesize_fn),
-        train_fn=lambda cfg, sc, pseudo, **kw: backbone.train(cfg, sc, train_dir, pseudo,
-                                                              **kw),
+        train_fn=lambda cfg, sc, pseudo, **kw: backbone.train(
+            cfg, sc, train_dir, pseudo, **dict(kw, desc=label or kw['desc'])),
         evaluate_fn=stored_evaluation(
             eval_dir, lambda cfg, sc, params: backbone.evaluate(cfg, sc, params,
                                                                 show_progress=False)))
     save_round(rdir, state, backbone.export)
   return state
+
+
+def run_control(config, scene, run_dir, state: renerf.RoundState,
+                show_progress=True) -> dict:
+  """The seed-matched control of round 1 (renerf.control_config) in
+  rundir.control_dir(run_dir), resuming what is there.
+
+  Args:
+    config, scene: the run's Config and Scene. run_dir: the run directory.
+    state: the run's RoundState after its rounds.
+    show_progress: draw progress bars.
+
+  Returns:
+    The control's test metrics; with Config.d_seed = 'same' the control is B itself
+    (the same Config), whose metrics are returned without training it again.
+  """
+  if config.d_seed == 'same':
+    return state.metrics[0]
+  return run_rounds(renerf.control_config(config), scene, rundir.control_dir(run_dir),
+                    show_progress, label='control').metrics[0]
+
+
+def save_comparison(run_dir, scene, rows: Sequence):
+  """Writes rundir.comparison_path(run_dir): the first test view's photo beside the
+  renders of `rows`, (title, round directory) pairs of finished rounds, each titled with
+  its PSNR on that view (read from the rounds' eval/ files, process 0 only)."""
+  if not distributed.is_writer():
+    return
+  import imageio.v3 as iio  # pylint: disable=g-import-not-at-top
+  images, titles = [scene.images[scene.test_idx[0]]], ['photo (test view 0)']
+  for title, rdir in rows:
+    ev_dir = rundir.eval_dir(rdir)
+    m = report.read_json(rundir.metrics_path(ev_dir))['per_image'][0]
+    images.append(iio.imread(rundir.render_path(ev_dir, m['name'])))
+    titles.append(f"{title}: {m['psnr']:.2f} dB")
+  figures.save_panels(rundir.comparison_path(run_dir), images, titles)

@@ -5,7 +5,8 @@ benchmarks and scripts derive paths with these functions:
 
   <run_dir>/   config.json, config.gin (config_json_path, config_gin_path), rounds.json/.md
                (rounds_table_paths), eval_rounds.json/.md (eval_rounds_paths),
-               error_vs_time.png, shared_baseline.json (experiments)
+               error_vs_time.png, shared_baseline.json (experiments), comparison.png
+    control/     control_dir: round 1's seed-matched control, a run directory of its own
     round_<r>/   round_dir: params.msgpack, result.json (params_path, result_path),
                  point_cloud.ply (Gaussians), copied_from.json (experiments), DONE
       train/          train_dir: checkpoints/ (checkpoints_dir, checkpoint_path), log.jsonl
@@ -59,6 +60,16 @@ def error_vs_time_path(run_dir):
 def shared_baseline_path(run_dir):
   """The experiments' note of the run whose round_0 was copied into run_dir."""
   return os.path.join(run_dir, 'shared_baseline.json')
+
+
+def control_dir(run_dir):
+  """The run directory of round 1's seed-matched control (Config.seed_control)."""
+  return os.path.join(run_dir, 'control')
+
+
+def comparison_path(run_dir):
+  """train.py's picture of one test view: photo | B | control | R1."""
+  return os.path.join(run_dir, 'comparison.png')
 
 
 def round_dir(run_dir, r):
@@ -193,23 +204,18 @@ def remove_stale_temp_files(directory):
   """Deletes the temp files that killed atomic writes left under `directory` (recursive).
 
   report.atomic_open writes '.<name>.<random>.tmp' next to its target and renames it over
-  the target; a SIGKILL (or power loss) before the rename leaves the temp file behind. It
-  is never read, but each one can be as large as a checkpoint. Call this only on a
-  directory no other process writes to (the unfinished round of this run).
-
-  Returns:
-    The removed paths.
+  the target; a SIGKILL (or power loss) before the rename leaves the temp file (never
+  read, as large as a checkpoint). Call this only on a directory no other process writes
+  to (the unfinished round of this run). Returns the removed paths.
   """
   removed = []
   for root, _, files in os.walk(directory):
-    for name in files:
-      if name.startswith('.') and name.endswith('.tmp'):
-        path = os.path.join(root, name)
-        try:
-          os.remove(path)
-        except FileNotFoundError:
-          continue
+    for path in [os.path.join(root, n) for n in files if n[0] == '.' and n.endswith('.tmp')]:
+      try:
+        os.remove(path)
         removed.append(path)
+      except FileNotFoundError:
+        pass
   return removed
 
 

@@ -21,7 +21,7 @@ def test_hessian_bench_matches_the_previous_pass_and_computes_fewer_padded_rays(
               'Config.num_samples = 8', 'Config.net_depth = 2', 'Config.net_width = 32',
               'Config.skip_layer = 1', 'Config.net_width_viewdirs = 16']
   demo = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                      'gin_configs', 'demo.gin')
+                      'gin_configs', 'demo_llff.gin')
   args = ['--configs', demo, '--rays', '100', '--chunk', '64',
           '--log2_res', '3', '--repeats', '1', '--out', str(tmp_path / 'h')]
   for b in bindings:

@@ -120,7 +120,7 @@ def test_train_py_finds_a_bare_config_name():
 
 def test_small_configs_change_sizes_not_code_paths():
   base = load_config([os.path.join(REPO, 'gin_configs', 'llff3.gin')])
-  for name in ('llff3_cpu.gin', 'demo.gin'):
+  for name in ('llff3_cpu.gin', 'demo_llff.gin'):
     c = load_config([os.path.join(REPO, 'gin_configs', name)])
     for field in ('use_ndc', 'ray_shape', 'num_levels', 'anneal_nearfar', 'depth_tv_decay',
                   'field', 'use_viewdirs', 'freq_reg', 'stop_level_grad'):
@@ -147,7 +147,7 @@ def test_bad_value_names_the_field():
 
 def test_bindings_do_not_leak_and_config_gin_round_trips(tmp_path):
   from renerf_jax.configs import config_to_gin  # pylint: disable=g-import-not-at-top
-  c = load_config([os.path.join(REPO, 'gin_configs', 'demo.gin')],
+  c = load_config([os.path.join(REPO, 'gin_configs', 'demo_llff.gin')],
                   ['Config.max_steps = 7', 'Config.num_rounds = 0'])
   assert Config().max_steps == 69768  # nothing of the parse leaks into later Configs
   path = tmp_path / 'config.gin'
@@ -195,7 +195,7 @@ def test_old_configs_map_to_new_files(old):
 @pytest.mark.parametrize('base', ['llff3.gin', 'llff3_cpu.gin', 'llff3_fast.gin',
                                   os.path.join(TABLES, 'llff3_10min.gin'),
                                   'llff3_proposal.gin', 'llff3_freenerf.gin',
-                                  'demo.gin'] + [
+                                  'demo_llff.gin'] + [
                                       ('llff3.gin', m) for m in MODIFIERS])
 def test_renerf_gin_on_any_base_adds_only_the_rounds(base):
   """renerf.gin stacked after a base changes num_rounds to 3 and nothing else; K

@@ -82,7 +82,7 @@ runpy.run_path(sys.argv[0], run_name='__main__')
 
 
 def _args(run_dir):
-  return (['train.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run_dir}'] +
+  return (['train.py', '--gin_configs=gin_configs/demo_llff.gin', f'--run_dir={run_dir}'] +
           [f'--gin_bindings={b}' for b in BINDINGS])
 
 

@@ -52,7 +52,7 @@ TIMEOUT = 600  # Seconds any one launch may take before the test kills it.
 
 
 def _args(run_dir):
-  return (['train.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run_dir}'] +
+  return (['train.py', '--gin_configs=gin_configs/demo_llff.gin', f'--run_dir={run_dir}'] +
           [f'--gin_bindings={b}' for b in BINDINGS])
 
 
@@ -213,7 +213,7 @@ def test_one_process_is_the_identity():
 
 
 def _train(args, timeout=120):
-  return subprocess.run([sys.executable, 'train.py', '--gin_configs=gin_configs/demo.gin']
+  return subprocess.run([sys.executable, 'train.py', '--gin_configs=gin_configs/demo_llff.gin']
                         + args, cwd=REPO, env=_env(), capture_output=True, text=True,
                         timeout=timeout, check=False)
 

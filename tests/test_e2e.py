@@ -24,7 +24,7 @@ def test_embedded_scene_training_beats_mean_colour_by_a_margin(tmp_path):
   threshold, mean colour + 2 dB, fails for a model that only learnt the average colour or
   did not train (a broken loss, sampling or schedule).
   """
-  config = load_config([str(REPO / 'gin_configs' / 'demo.gin')],
+  config = load_config([str(REPO / 'gin_configs' / 'demo_llff.gin')],
                        ['Config.max_steps = 300', 'Config.eval_every = 0',
                         "Config.lpips_nets = ('alex',)"])
   scene = load_scene(config)
@@ -53,7 +53,7 @@ TINY = ['--gin_bindings=Config.procedural_size=(32, 40)', '--gin_bindings=Config
 
 def test_cli_train_resume_eval_on_embedded_scene(tmp_path):
   run = str(tmp_path / 'run')
-  res = _cli(['train.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] + TINY)
+  res = _cli(['train.py', '--gin_configs=gin_configs/demo_llff.gin', f'--run_dir={run}'] + TINY)
   assert res.returncode == 0, res.stderr[-2000:]
   assert '| baseline |' in res.stdout and '| Re-Nerfing R1 |' in res.stdout
   rounds = json.load(open(os.path.join(run, 'rounds.json')))
@@ -68,7 +68,7 @@ def test_cli_train_resume_eval_on_embedded_scene(tmp_path):
   assert [r['round'] for r in rounds] == [0, 1]
   params = open(os.path.join(run, 'round_0', 'params.msgpack'), 'rb').read()
   # Rerun: finished rounds are skipped, nothing is retrained or rewritten.
-  res = _cli(['train.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] + TINY)
+  res = _cli(['train.py', '--gin_configs=gin_configs/demo_llff.gin', f'--run_dir={run}'] + TINY)
   assert res.returncode == 0 and 'round 0' not in res.stderr.replace('round_0', '')
   assert open(os.path.join(run, 'round_0', 'params.msgpack'), 'rb').read() == params
   # eval.py: per-image metrics, rounds table, error-vs-time table and plot; the finished
@@ -76,7 +76,7 @@ def test_cli_train_resume_eval_on_embedded_scene(tmp_path):
   finished = {p: os.path.getmtime(p) for p in (
       os.path.join(run, 'round_0', 'eval', 'metrics.json'),
       os.path.join(run, 'round_1', 'eval', 'test_000.png'))}
-  res = _cli(['eval.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] + TINY)
+  res = _cli(['eval.py', '--gin_configs=gin_configs/demo_llff.gin', f'--run_dir={run}'] + TINY)
   assert res.returncode == 0, res.stderr[-2000:]
   assert 'Error against run time' in res.stdout and '| Re-Nerfing R1 |' in res.stdout
   assert os.path.isfile(os.path.join(run, 'error_vs_time.png'))
@@ -86,7 +86,7 @@ def test_cli_train_resume_eval_on_embedded_scene(tmp_path):
   assert {p: os.path.getmtime(p) for p in finished} == finished
   assert not os.path.exists(os.path.join(run, 'round_0', 'eval_extra'))
   # A metric the round did not compute (LPIPS-vgg) is rendered into eval_extra/, once.
-  res = _cli(['eval.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] + TINY[:-1]
+  res = _cli(['eval.py', '--gin_configs=gin_configs/demo_llff.gin', f'--run_dir={run}'] + TINY[:-1]
              + ["--gin_bindings=Config.lpips_nets=('alex', 'vgg')"])
   assert res.returncode == 0, res.stderr[-2000:]
   extra = json.load(open(os.path.join(run, 'round_0', 'eval_extra', 'metrics.json')))
@@ -98,7 +98,7 @@ def test_cli_refuses_a_different_config_on_an_existing_run(tmp_path):
   os.makedirs(run)
   with open(os.path.join(run, 'config.json'), 'w') as f:
     json.dump({'max_steps': 1}, f)
-  res = _cli(['train.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] + TINY)
+  res = _cli(['train.py', '--gin_configs=gin_configs/demo_llff.gin', f'--run_dir={run}'] + TINY)
   assert res.returncode == 2
   assert res.stderr.strip().count('\n') == 0 and 'different configuration' in res.stderr
   assert json.load(open(os.path.join(run, 'config.json'))) == {'max_steps': 1}
@@ -152,3 +152,42 @@ def test_run_dir_made_before_a_new_config_field_still_resumes(tmp_path):
   with pytest.raises(Exception, match='hessian_rays'):
     cli.check_run_dir(dataclasses.replace(config, hessian_rays=7), str(tmp_path / 'run'),
                       create=False)
+
+
+ORBIT_TINY = ['--gin_bindings=Config.procedural_size=(32, 32)',
+              '--gin_bindings=Config.procedural_views=16', '--gin_bindings=Config.max_steps=40',
+              '--gin_bindings=Config.pseudo_until_frac=0.5',
+              '--gin_bindings=Config.eval_every=20']
+
+
+def test_demo_reports_r1_against_its_seed_matched_control(tmp_path):
+  """README command 1's config (the 360-degree scene, the grid, Config.seed_control):
+  train.py trains B, R1 and the control at D's seed, prints the three rows and the
+  deltas as the files hold them, draws the comparison picture, and a rerun retrains
+  nothing. With Config.d_seed = 'same' the control is B itself (not trained again)."""
+  run = str(tmp_path / 'run')
+  res = _cli(['train.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] +
+             ORBIT_TINY)
+  assert res.returncode == 0, res.stderr[-2000:]
+  assert 'scene orbit: 12 train / 2 test views at 32x32' in res.stderr
+  for row in ('| baseline |', "| control (D's seed, no pseudo-views) |", '| Re-Nerfing R1 |'):
+    assert row in res.stdout, res.stdout
+  rounds = json.load(open(os.path.join(run, 'rounds.json')))
+  control = json.load(open(os.path.join(run, 'control', 'round_0', 'result.json')))['metrics']
+  assert f"R1 - control: PSNR {rounds[1]['psnr'] - control['psnr']:+.2f}" in res.stdout
+  assert f"control - baseline: PSNR {control['psnr'] - rounds[0]['psnr']:+.2f}" in res.stdout
+  assert control['psnr'] != rounds[0]['psnr']  # Another seed: another model.
+  assert os.path.isfile(os.path.join(run, 'comparison.png'))
+  assert 'control' in open(os.path.join(run, 'rounds.md')).read()
+  params = os.path.join(run, 'control', 'round_0', 'params.msgpack')
+  mtime = os.path.getmtime(params)
+  res = _cli(['train.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={run}'] +
+             ORBIT_TINY)
+  assert res.returncode == 0 and os.path.getmtime(params) == mtime
+  assert 'control:' not in res.stderr  # No progress bar: nothing trained.
+  same = str(tmp_path / 'same')
+  res = _cli(['train.py', '--gin_configs=gin_configs/demo.gin', f'--run_dir={same}',
+              "--gin_bindings=Config.d_seed='same'"] + ORBIT_TINY)
+  assert res.returncode == 0, res.stderr[-2000:]
+  assert not os.path.exists(os.path.join(same, 'control'))
+  assert 'control - baseline: PSNR +0.00, SSIM +0.000' in res.stdout

@@ -35,7 +35,7 @@ def assert_table_cells(md):
 
 
 def _run(module, out, *extra):
-  cmd = ([sys.executable, '-m', f'experiments.{module}', '--config', 'gin_configs/demo.gin',
+  cmd = ([sys.executable, '-m', f'experiments.{module}', '--config', 'gin_configs/demo_llff.gin',
           '--out', str(out), '--seeds', '0', '1'] + [f'--gin_bindings={b}' for b in TINY]
          + list(extra))
   res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
@@ -50,7 +50,7 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   t1 = json.loads((out / 't1.json').read_text())
   # The command recorded is the one that ran: the script as a module (python -m).
   assert t1['command'].startswith(
-      'python -m experiments.renerf_rounds --config gin_configs/demo.gin ')
+      'python -m experiments.renerf_rounds --config gin_configs/demo_llff.gin ')
   rows = t1['rows']
   assert [r['round'] for r in rows[:2]] == ['baseline', 'R1']
   eq = json.loads((out / 't1' / 'equal_time.json').read_text())
@@ -95,7 +95,7 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   # The camera-path video of the baseline against the last round.
   gif = out / 'video.gif'
   cmd = [sys.executable, '-m', 'experiments.render_video', '--run_dir',
-         str(out / 't1' / 'Re-Nerfing' / 'seed0'), '--config', 'gin_configs/demo.gin',
+         str(out / 't1' / 'Re-Nerfing' / 'seed0'), '--config', 'gin_configs/demo_llff.gin',
          '--frames', '4', '--out', str(gif)] + [f'--gin_bindings={b}' for b in TINY]
   res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300,
                        check=False)
@@ -107,7 +107,7 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   run0 = out / 't1' / 'Re-Nerfing' / 'seed0'
   before = sorted(str(f) for f in run0.rglob('*'))
   cmd = [sys.executable, '-m', 'experiments.uncertainty_panel', '--run_dir', str(run0),
-         '--config', 'gin_configs/demo.gin', '--work_dir', str(tmp_path / 'masks'),
+         '--config', 'gin_configs/demo_llff.gin', '--work_dir', str(tmp_path / 'masks'),
          '--views', '0', '1', '--out', str(out / 'unc')] + [
              f'--gin_bindings={b}' for b in TINY + ['Config.deform_log2_res = 2',
                                                    'Config.hessian_rays = 128']]
@@ -199,7 +199,7 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   longer and B at the rounds' total time, with paired deltas and win counts."""
   out = tmp_path / 'results'
   cmd = ([sys.executable, '-m', 'experiments.renerf_scenes', '--name', 's', '--config',
-          'gin_configs/demo.gin', '--out', str(out), '--seeds', '0', '1', '--scenes',
+          'gin_configs/demo_llff.gin', '--out', str(out), '--seeds', '0', '1', '--scenes',
           'procedural', '--rounds_scenes', 'procedural', '--variant',
           'R1 + masks=Config.use_masks=True;Config.deform_log2_res=2;'
           'Config.hessian_rays=256', "--gin_bindings=Config.dataset_loader='procedural'"]
@@ -309,7 +309,7 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
     assert 'Traceback' not in bad.stderr
   # experiments/test_renders.py: the photo | B | R1 | B 2x of the runs, from their PNGs.
   renders = [sys.executable, '-m', 'experiments.test_renders', '--runs', str(out / 's'),
-             '--config', 'gin_configs/demo.gin', '--scenes', 'procedural',
+             '--config', 'gin_configs/demo_llff.gin', '--scenes', 'procedural',
              "--gin_bindings=Config.dataset_loader='procedural'"] + [
                  f'--gin_bindings={b}' for b in TINY]
   sub = subprocess.run(renders + ['--seed', '1', '--out', str(out / 'renders.png')],
@@ -327,7 +327,7 @@ def test_equal_time_comparison_takes_given_idle_rates_and_per_method_seeds(tmp_p
   the given rate, curve time = step x rate) and --seeds_of; bad values fail in one line."""
   out = tmp_path / 'results'
   cmd = lambda *opts: ([sys.executable, '-m', 'experiments.compare_equal_time', '--name', 'eq',
-                        '--base', 'gin_configs/demo.gin', '--out', str(out), '--budget_s', '6',
+                        '--base', 'gin_configs/demo_llff.gin', '--out', str(out), '--budget_s', '6',
                         '--seeds', '0', '1', '--method', 'A=', '--method',
                         'B=gin_configs/modifiers/no_depth_tv.gin', '--calib_steps', '2']
                        + [f'--gin_bindings={b}' for b in TINY] + list(opts))
@@ -410,7 +410,7 @@ def test_scenes_table_with_d_sharing_b_seed_copies_b_as_its_controls(tmp_path):
   bit for bit (nothing trained), and R1 is paired with them."""
   out = tmp_path / 'results'
   cmd = ([sys.executable, '-m', 'experiments.renerf_scenes', '--name', 'same', '--config',
-          'gin_configs/demo.gin', '--out', str(out), '--seeds', '0', '--scenes',
+          'gin_configs/demo_llff.gin', '--out', str(out), '--seeds', '0', '--scenes',
           'procedural', "--gin_bindings=Config.dataset_loader='procedural'",
           "--gin_bindings=Config.d_seed='same'"] + [f'--gin_bindings={b}' for b in TINY])
   res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=900,

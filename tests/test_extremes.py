@@ -211,7 +211,7 @@ def test_single_training_view_with_interpolation_is_one_config_error(tmp_path):
 def test_single_training_view_cli_exits_2_with_one_error_line(tmp_path):
   env = dict(os.environ, PYTHONPATH=str(REPO))
   res = subprocess.run(
-      [sys.executable, 'train.py', '--gin_configs=gin_configs/demo.gin',
+      [sys.executable, 'train.py', '--gin_configs=gin_configs/demo_llff.gin',
        f'--run_dir={tmp_path}/run', '--gin_bindings=Config.n_input_views=1',
        '--gin_bindings=Config.procedural_size=(32, 40)'],
       cwd=REPO, env=env, capture_output=True, text=True, timeout=300, check=False)

@@ -142,3 +142,16 @@ def test_image_metrics_keys_and_values():
       metrics.avg_err(out['psnr'], out['ssim'], out['lpips_alex']), rtol=1e-9)
   only_ssim_psnr = metrics.image_metrics(p1, ref, lpips_nets=())
   assert set(only_ssim_psnr) == {'psnr', 'ssim'}
+
+
+def test_lpips_alex_size_is_checked_before_training():
+  """LPIPS-alex on views under 31 px a side is refused by Config check before any
+  training (renerf.check_rounds_config calls it), naming the value; vgg alone or 31 px
+  pass."""
+  from renerf_jax.errors import ConfigError  # pylint: disable=g-import-not-at-top
+  with pytest.raises(ConfigError, match=r"Config.lpips_nets=\('vgg', 'alex'\).*24x30"):
+    metrics.check_lpips_size(('vgg', 'alex'), 30, 24)
+  metrics.check_lpips_size(('vgg',), 30, 24)
+  metrics.check_lpips_size(('alexnet',), 31, 31)
+  with pytest.raises(ConfigError):
+    metrics.check_lpips_size(('alexnet',), 31, 30)

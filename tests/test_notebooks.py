@@ -21,3 +21,5 @@ def test_notebook_executes(name, fern_dir):
   assert not [o for o in outputs if o.get('output_type') == 'error']
   text = ''.join(o.get('text', '') for o in outputs if o.get('output_type') == 'stream')
   assert '| baseline |' in text
+  if name == 'quickstart.ipynb':  # The demo's verdict: R1 against its seed-matched control.
+    assert "| control (D's seed, no pseudo-views) |" in text and 'R1 - control: PSNR' in text

@@ -1,5 +1,5 @@
-"""Datasets: LLFF, transforms.json (Instant-NGP / nerfstudio), Blender and the embedded
-procedural scene, behind one `load_scene`."""
+"""Datasets: LLFF, transforms.json (Instant-NGP / nerfstudio), Blender and the two embedded
+scenes (forward-facing 'procedural', 360-degree 'orbit'), behind one `load_scene`."""
 from renerf_jax.datasets.scene import (Scene, camera_rays, downsample_scene, fewshot_split,
                                        ray_pool)
 
@@ -18,6 +18,9 @@ def load_scene(config) -> Scene:
   elif config.dataset_loader == 'blender':
     from renerf_jax.datasets.blender import load_blender  # pylint: disable=g-import-not-at-top
     scene = load_blender(config)
+  elif config.dataset_loader == 'orbit':
+    from renerf_jax.datasets.orbit import load_orbit  # pylint: disable=g-import-not-at-top
+    scene = load_orbit(config)
   else:
     from renerf_jax.datasets.procedural import load_procedural  # pylint: disable=g-import-not-at-top
     scene = load_procedural(config)

@@ -207,14 +207,34 @@ def load_transforms(config) -> Scene:
   meta = _read_json(meta_path)
   half = 1.5 * (_number(meta, 'aabb_scale', meta_path, 'top-level')
                 if 'aabb_scale' in meta else 1.)
-  box = np.array([(-half,) * 3, (half,) * 3])
+  return object_scene(config, config.scene, images, poses, fx, ((-half,) * 3, (half,) * 3),
+                      train_idx, test_idx, intrinsics=None if pinhole else intr)
+
+
+def object_scene(config, name, images, poses, focal, box, train_idx, test_idx,
+                 intrinsics=None, depths=None) -> Scene:
+  """The Scene of a capture around an object (not forward-facing, no NDC).
+
+  Args:
+    config: Config (normalize_poses, near, far, white_bkgd).
+    name: the scene's name. images: [N, H, W, 3] in [0, 1]. poses: [N, 3, 4] c2w.
+    focal: pixels. box: ((lo x, y, z), (hi x, y, z)) holding the scene, world units.
+    train_idx, test_idx: the split. intrinsics: (fx, fy, cx, cy, k1, k2, p1, p2) when
+      not the centred pinhole of `focal`. depths: [N, H, W] true z-depths, or None.
+
+  Returns:
+    The Scene; with Config.normalize_poses the cameras, the box and the depths are moved
+    and scaled together (normalize_poses).
+  """
+  box = np.array(box, np.float64)
   if config.normalize_poses:
     poses, centre, scale = normalize_poses(poses)
     box = (box - centre) * scale
+    depths = None if depths is None else depths * scale
   box = tuple(tuple(float(v) for v in b) for b in box)
-  return Scene(name=config.scene, images=images.astype(np.float32),
-               poses=poses.astype(np.float32), focal=float(fx), near=config.near,
+  return Scene(name=name, images=images.astype(np.float32),
+               poses=poses.astype(np.float32), focal=float(focal), near=config.near,
                far=config.far, use_ndc=False, white_bkgd=config.white_bkgd,
                train_idx=np.asarray(train_idx), test_idx=np.asarray(test_idx),
-               forward_facing=False, bbox=box, world_bounds=box,
-               intrinsics=None if pinhole else intr)
+               depths=None if depths is None else depths.astype(np.float32),
+               forward_facing=False, bbox=box, world_bounds=box, intrinsics=intrinsics)
