@@ -3,8 +3,8 @@ of one training step and the whole step's time against the number of Gaussians.
 
 python -m benchmarks.bench_raster --out benchmarks/results/gaussians_raster
 
-'old' is the rasteriser of commit 7346aa4 (benchmarks/raster_old, verbatim), 'new' the
-package's (renerf_jax/gaussians). Both run the same scene: n random Gaussians in fern's
+'old' is the rasteriser and image loss of commit 7346aa4 (benchmarks/raster_old,
+verbatim), 'new' the package's (renerf_jax/gaussians). Both run the same scene: n random Gaussians in fern's
 world box (as a fresh run starts, bench_gaussians.py), fern at 1/4 (126x94), the config
 gaussians_llff3.gin (no tile cap). Every time is the median of --repeats calls after a
 warm-up, each call waited for with jax.block_until_ready; compile time is the first
@@ -15,7 +15,8 @@ Stages (each its own jitted function, at --stage_count Gaussians):
   bin       tile lists (depth order, per tile);
   blend     alpha blending of the lists (forward);
   blend+vjp blending, forward and backward (custom VJP) of a weighted sum of its outputs;
-  render+grad  the step's render, loss (L1 + SSIM) and gradients of all fields;
+  loss+grad the image loss (L1 + SSIM) and its gradient;
+  render+grad  the step's render, loss and gradients of all fields;
   adam      the per-field Adam update;
   step      the whole train_step (render+grad, Adam, density statistics).
 """
@@ -30,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks.bench_throughput import time_calls
+from benchmarks.raster_old import loss as old_loss
 from benchmarks.raster_old import rasterize as old_rasterize
 from benchmarks.raster_old import render as old_render
 from benchmarks.raster_old import tiles as old_tiles
@@ -38,6 +40,7 @@ from renerf_jax import report
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.gaussians import blocks
+from renerf_jax.gaussians import loss as new_loss
 from renerf_jax.gaussians import params as params_lib
 from renerf_jax.gaussians import projection
 from renerf_jax.gaussians import rasterize as new_rasterize
@@ -72,19 +75,25 @@ def _new_blend(lists, means2d, conics, colours, opac, depths, h, w, bg):
                                         h, w, bg, TILE)
 
 
-IMPLS = {'old': (old_render.render, _old_bin, _old_blend),
-         'new': (new_render.render, _new_bin, _new_blend)}
+def _old_render(*args, capacity=None, **kwargs):
+  del capacity  # The old render had no capacity (its uncapped lists were [T, N]).
+  return old_render.render(*args, **kwargs)
+
+
+IMPLS = {'old': (_old_render, _old_bin, _old_blend, old_loss.image_loss),
+         'new': (new_render.render, _new_bin, _new_blend, new_loss.image_loss)}
 
 
 @contextlib.contextmanager
-def renderer(render_fn):
-  """The package's render (what train_step calls) replaced by render_fn meanwhile."""
-  saved = new_render.render
-  new_render.render = render_fn
+def renderer(impl):
+  """The package's render and image loss (what train_step calls) replaced by the
+  implementation's meanwhile."""
+  saved = new_render.render, gtrain.image_loss
+  new_render.render, gtrain.image_loss = IMPLS[impl][0], IMPLS[impl][3]
   try:
     yield
   finally:
-    new_render.render = saved
+    new_render.render, gtrain.image_loss = saved
 
 
 def setup(config, scene, n):
@@ -111,7 +120,7 @@ def time_step(impl, config, scene, n, repeats):
   """(seconds per train step, compile seconds, cap-bound fraction) of n Gaussians."""
   cfg, cam, state, data, extent = setup(config, scene, n)
   key = jax.random.PRNGKey(1)
-  with renderer(IMPLS[impl][0]):
+  with renderer(impl):
     step = fresh_step()
     t = time.perf_counter()
     state, _ = step(cfg, cam, False, state, data, extent, key)
@@ -137,7 +146,7 @@ def timed(fn, args, repeats):
 
 def stage_profile(impl, config, scene, n, repeats):
   """{stage: (median s, compile s)} of one training step's stages (module docstring)."""
-  render_fn, bin_fn, blend_fn = IMPLS[impl]
+  _, bin_fn, blend_fn, _ = IMPLS[impl]
   cfg, cam, state, data, extent = setup(config, scene, n)
   h, w, cap = cam.h, cam.w, cfg.gs_tile_cap
   g = new_render.sanitise(state.params)
@@ -165,20 +174,49 @@ def stage_profile(impl, config, scene, n, repeats):
                                                          wts))
     return jax.value_and_grad(f, argnums=range(5))(*s)
 
-  with renderer(render_fn):
+  with renderer(impl):
     grads = jax.jit(lambda p: gtrain.loss_and_grads(cfg, cam, p, image, pose,
                                                     data['masks'][0], 3))
+    loss_grad = jax.jit(jax.value_and_grad(lambda rgb: IMPLS[impl][3](
+        rgb, image, data['masks'][0], cfg.gs_lambda_dssim)[0]))
     opt = schedule.make_optimizer(cfg, extent)
     adam = jax.jit(lambda gr, st, f: opt.update(gr, st, f))
     out = {'project': timed(project, (g, pose), repeats),
            'bin': timed(bins, (proj, opac), repeats),
            'blend': timed(blend, (lists,) + screen, repeats),
            'blend+vjp': timed(blend_vjp, (lists,) + screen, repeats),
+           'loss+grad': timed(loss_grad, (blend(lists, *screen)[0],), repeats),
            'render+grad': timed(grads, (state.params,), repeats)}
     fields = gtrain.to_fields(state.params)
     out['adam'] = timed(adam, (grads(state.params)[3], state.opt_state, fields), repeats)
   step_s, compile_s, _ = time_step(impl, config, scene, n, repeats)
   out['step'] = (step_s, compile_s)
+  return out
+
+
+def compare(config, scene, n, views=3):
+  """Old against new on n random Gaussians at the first training views: the largest
+  |difference| of rgb, depth, acc (render at SH degree 3), and per field of the step's
+  gradients (loss_and_grads) the largest |difference| over the largest |gradient|."""
+  cfg, cam, state, data, _ = setup(config, scene, n)
+  out = {'gaussians': n}
+  grads = {}
+  for impl in ('old', 'new'):
+    with renderer(impl):
+      fn = jax.jit(lambda p, pose, image, mask: gtrain.loss_and_grads(
+          cfg, cam, p, image, pose, mask, 3))
+      grads[impl] = [jax.device_get(fn(state.params, data['poses'][v], data['images'][v],
+                                       data['masks'][v])) for v in range(views)]
+  for k in ('rgb', 'depth', 'acc'):
+    out[k] = max(float(np.abs(a[2][k] - b[2][k]).max())
+                 for a, b in zip(grads['old'], grads['new']))
+  out['loss'] = max(abs(float(a[0] - b[0])) for a, b in zip(grads['old'], grads['new']))
+  for k in gtrain.to_fields(state.params):
+    out['grad_' + k] = max(float(np.abs(a[3][k] - b[3][k]).max() /
+                                 max(np.abs(a[3][k]).max(), 1e-30))
+                           for a, b in zip(grads['old'], grads['new']))
+  out['grad2d'] = max(float(np.abs(a[4] - b[4]).max() / max(np.abs(a[4]).max(), 1e-30))
+                      for a, b in zip(grads['old'], grads['new']))
   return out
 
 
@@ -199,6 +237,8 @@ def main():
   p.add_argument('--impls', nargs='+', default=['old', 'new'])
   p.add_argument('--repeats', type=int, default=10)
   p.add_argument('--no_stages', action='store_true')
+  p.add_argument('--check_counts', type=int, nargs='*', default=[1000, 20000],
+                 help='Gaussian counts of the old-against-new numeric check')
   p.add_argument('--out', default=os.path.join(REPO, 'benchmarks', 'results',
                                                'gaussians_raster'))
   args = p.parse_args()
@@ -220,11 +260,14 @@ def main():
       row['speedup'] = row['old_step_s'] / row['new_step_s']
     rows.append(row)
     print(row, flush=True)
+  checks = [compare(config, scene, n) for n in args.check_counts]
+  for c in checks:
+    print(c, flush=True)
   cmd = command_line('benchmarks.bench_raster')
   report.write_json(args.out + '.json', {'command': cmd, 'rows': rows, 'stages': {
       impl: {k: {'median_s': v[0], 'compile_s': v[1]} for k, v in s.items()}
       for impl, s in stages.items()}, 'stage_count': args.stage_count, 'image': size,
-      'repeats': args.repeats})
+      'repeats': args.repeats, 'checks': checks})
   cols = [('image', 'image'), ('gaussians', 'Gaussians')]
   for impl in args.impls:
     cols += [(f'{impl}_step_s', f'{impl} step [s]'),
@@ -242,6 +285,10 @@ def main():
         (f'{impl}_s', f'{impl} [s]'), (f'{impl}_c', f'{impl} compile [s]'))]
     text += (f'\n## Stages at {args.stage_count} Gaussians, {size}\n\n' +
              report.markdown_table(srows, scols) + '\n')
+  if checks:
+    text += ('\n## Old against new (max |difference|; gradients: over max |gradient|, '
+             'per field, 3 training views)\n\n' +
+             report.markdown_table(checks, floatfmt='.2e') + '\n')
   report.write_markdown(args.out + '.md', text)
 
 
