@@ -29,8 +29,10 @@ conditioned); the forward pass keeps per pixel the list index of the Gaussian th
 ended it, so the walk knows which were composited, and
   dL/dalpha_i = T_i (c_i . dL/dC + d_i dL/dD) - S_i / (1 - alpha_i),
 where S_i is what lies behind Gaussian i: sum_{j > i} T_j alpha_j (c_j . dL/dC + d_j dL/dD)
-+ T_final dL/dT_final. Per chunk the per-Gaussian sums over the block's pixels are
-scatter-added into one [N + 1, 10] table. tests/test_gaussians.py checks it against
++ T_final dL/dT_final. Per chunk the per-Gaussian sums over the block's pixels are two
+matrix products (moments of dL/dsigma against the pixels' offsets from the block centre,
+from which the mean and conic sums follow; the blend weights against the colour and
+depth cotangents), scatter-added into one [N + 1, 10] table. tests/test_gaussians.py checks it against
 autodiff of the dense reference.
 """
 import functools
@@ -54,6 +56,7 @@ GROUP = 256
 # Columns of the packed per-Gaussian table (one gather per chunk instead of five).
 U, V, CA, CB, CC, OP, R, G, B, DEP = range(10)
 WIDTH = 10
+HIGHEST = jax.lax.Precision.HIGHEST
 
 
 def _table(means2d, conics, colours, opacities, depths):
@@ -166,10 +169,14 @@ def _backward(ids, table, px, py, trans, stop, walked, g_rgb, g_dep, g_trans, ch
   """[N + 1, 10] cotangents of the packed table, each group's chunks back to front."""
   num_blocks = ids.shape[0]
   slot = jnp.arange(chunk, dtype=jnp.int32)[:, None]
+  qx, qy = px[0] - jnp.mean(px[0]), py[0] - jnp.mean(py[0])  # Offsets from the centre.
+  basis = jnp.stack([jnp.ones_like(qx), qx, qy, qx * qx, qx * qy, qy * qy], -1)
 
   def one_group(i, grads):
     gids, gpx, gpy, gstop, grgb, gdep = (_group(x, i, group) for x in (
         ids, px, py, stop, g_rgb, g_dep))
+    gcot = jnp.concatenate([jnp.swapaxes(grgb, 1, 2), gdep[..., None]], -1)  # [G, P, 4]
+    cx, cy = jnp.mean(gpx, axis=1), jnp.mean(gpy, axis=1)
 
     def body(j, carry):
       t_after, behind, grads = carry
@@ -190,12 +197,22 @@ def _backward(ids, table, px, py, trans, stop, walked, g_rgb, g_dep, g_trans, ch
       d_alpha = jnp.where(comp, before * v - after / keep, 0.)
       d_raw = jnp.where(raw < ALPHA_MAX, d_alpha, 0.)
       d_sigma = -d_raw * raw
-      sums = [d_sigma * (col(CA) * dx + col(CB) * dy),
-              d_sigma * (col(CC) * dy + col(CB) * dx),
-              0.5 * d_sigma * dx * dx, d_sigma * dx * dy, 0.5 * d_sigma * dy * dy,
-              d_raw * expo, w * grgb[:, None, 0], w * grgb[:, None, 1],
-              w * grgb[:, None, 2], w * gdep[:, None]]
-      per = jnp.stack([jnp.sum(x, axis=-1) for x in sums], -1)  # [G, C, 10], as table.
+      # Pixel sums as two matrix products: moments of d_sigma over the block's pixel
+      # offsets from its centre, and w against the block's colour and depth cotangents.
+      mom = jnp.einsum('gcp,pk->gck', d_sigma, basis, precision=HIGHEST)  # [G, C, 6]
+      cw = jnp.einsum('gcp,gpk->gck', w, gcot, precision=HIGHEST)  # [G, C, 4]
+      m0, mx, my, mxx, mxy, myy = (mom[..., j] for j in range(6))
+      ul, vl = g[:, :, U] - cx[:, None], g[:, :, V] - cy[:, None]
+      sdx, sdy = ul * m0 - mx, vl * m0 - my
+      sxx = ul * ul * m0 - 2. * ul * mx + mxx
+      sxy = ul * vl * m0 - ul * my - vl * mx + mxy
+      syy = vl * vl * m0 - 2. * vl * my + myy
+      op = g[:, :, OP]
+      d_op = jnp.where(op > 0., -m0 / jnp.where(op > 0., op, 1.), 0.)
+      per = jnp.stack([g[:, :, CA] * sdx + g[:, :, CB] * sdy,
+                       g[:, :, CC] * sdy + g[:, :, CB] * sdx,
+                       0.5 * sxx, sxy, 0.5 * syy, d_op], -1)
+      per = jnp.concatenate([per, cw], -1)  # [G, C, 10], as table.
       return before[:, 0], behind + suffix[:, 0], grads.at[c].add(per)
 
     init = (_group(trans, i, group), _group(trans * g_trans, i, group), grads)
