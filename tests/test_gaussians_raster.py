@@ -65,6 +65,28 @@ def test_pair_lists_are_the_block_lists_of_the_uncapped_tile_lists():
   assert int(length.sum()) < 0.6 * int(count.sum()) * 4
 
 
+def test_pair_lists_sorting_a_prefix_of_the_buffer_changes_nothing(monkeypatch):
+  """pair_lists sorts only the smallest prefix of its buffer that holds the pairs: the
+  same lists, lengths and bindings as sorting the whole buffer, for pair totals from
+  a tenth of the buffer to beyond it (the capacity binding)."""
+  g = _scene(2, 400)
+  proj, _, opac = _screen(g, _pose())
+  num_blocks = np.prod(blocks.block_grid(H, W, 16, 8))
+  total = int(_pairs(proj, opac, 512)[1].sum())
+  assert total > 10 * num_blocks
+  seen = set()
+  for fill in (0.1, 0.45, 0.7, 0.95, 1., 2.):  # total / buffer size.
+    capacity = max(int(total / (fill * num_blocks)), 1)
+    got = _pairs(proj, opac, capacity)
+    with monkeypatch.context() as m:
+      m.setattr(blocks, 'SIZE_STEPS', 1)  # The whole buffer only.
+      want = _pairs(proj, opac, capacity)
+    for a, b in zip(got, want):
+      np.testing.assert_array_equal(a, b)
+    seen.add(bool(np.asarray(got[3]).any()))
+  assert seen == {False, True}  # Some capacities bind, some do not.
+
+
 def test_block_lists_keep_every_gaussian_that_reaches_a_pixel_of_the_block():
   g = _scene(1, 300)
   proj, _, opac = _screen(g, _pose())

@@ -22,6 +22,9 @@ ALPHA_MIN = 1. / 255.
 # evaluation of sigma is only trusted to ~1e-7 * this, well inside the margins below.
 MAX_ELONGATION = 1e4
 REACH_SLACK = 1e-3  # Relative and absolute (pixels) margins of the reach.
+# pair_lists sorts the smallest prefix of its pair buffer, buffer / 2^(k / 2) with
+# k < SIZE_STEPS, that holds all its pairs.
+SIZE_STEPS = 10
 
 
 def block_grid(height, width, tile, block):
@@ -157,7 +160,9 @@ def pair_lists(means2d, radius, conics, opacities, depths, valid, height, width,
   In depth order (a stable argsort, nearest first, ties by id), each Gaussian emits one
   pair per block of its box (its tiles' blocks within its alpha reach) into a buffer
   of K * capacity pairs; a pair's key, block * N + depth rank, is unique, so one
-  single-operand int32 sort groups the pairs by block in depth order.
+  single-operand int32 sort groups the pairs by block in depth order. The pairs fill
+  the buffer's first slots, so only the smallest of SIZE_STEPS prefixes that holds them
+  is built and sorted (a lax.switch; the lists are the whole buffer's).
 
   Args:
     means2d: [N, 2]. radius: [N] (tile box). conics: [N, 3]. opacities: [N].
@@ -189,19 +194,29 @@ def pair_lists(means2d, radius, conics, opacities, depths, valid, height, width,
   num = jnp.where(ok & (rx >= 0.), span * jnp.maximum(y1 - y0, 0), 0)
   start = jnp.cumsum(num) - num  # First pair of each Gaussian, in depth order.
   total = start[-1] + num[-1] if n else jnp.zeros((), jnp.int32)
-  # Pair m belongs to the last Gaussian (rank s) starting at or before m.
-  first = jnp.zeros((pairs,), jnp.int32).at[start].max(jnp.arange(n, dtype=jnp.int32),
-                                                      mode='drop')
-  s = jax.lax.cummax(first)
-  j = jnp.arange(pairs, dtype=jnp.int32) - start[s]
-  by, bx = jnp.divmod(j, jnp.maximum(span[s], 1))
-  key = (y0[s] + by) * (blocks_x * n) + (x0[s] + bx) * n + s
-  key = jnp.sort(jnp.where(jnp.arange(pairs) < total, key, jnp.iinfo(jnp.int32).max))
-  bounds = jnp.searchsorted(key, jnp.arange(num_blocks + 1, dtype=jnp.int32) * n)
-  kept = bounds[1:] - bounds[:-1]
-  slot = jnp.arange(width_l, dtype=jnp.int32)
-  at = jnp.minimum(bounds[:-1, None] + slot, pairs - 1)
-  ids = jnp.where(slot < kept[:, None], order[key[at] % n], n)
+
+  def lists(size):
+    """ids, kept from the first `size` (>= min(total, pairs)) slots of the buffer."""
+    # Pair m belongs to the last Gaussian (rank s) starting at or before m.
+    first = jnp.zeros((size,), jnp.int32).at[start].max(jnp.arange(n, dtype=jnp.int32),
+                                                       mode='drop')
+    s = jax.lax.cummax(first)
+    j = jnp.arange(size, dtype=jnp.int32) - start[s]
+    by, bx = jnp.divmod(j, jnp.maximum(span[s], 1))
+    key = (y0[s] + by) * (blocks_x * n) + (x0[s] + bx) * n + s
+    key = jnp.sort(jnp.where(jnp.arange(size) < total, key, jnp.iinfo(jnp.int32).max))
+    bounds = jnp.searchsorted(key, jnp.arange(num_blocks + 1, dtype=jnp.int32) * n)
+    kept = bounds[1:] - bounds[:-1]
+    slot = jnp.arange(width_l, dtype=jnp.int32)
+    at = jnp.minimum(bounds[:-1, None] + slot, size - 1)
+    return jnp.where(slot < kept[:, None], order[key[at] % n], n), kept
+
+  # The pairs fill the buffer's first `total` slots (the rest sort last): only the
+  # smallest of these prefixes that holds them is built and sorted.
+  sizes = sorted({max(-(-pairs * 2**16 // round(2**(16 + k / 2))), 1)
+                  for k in range(SIZE_STEPS)})
+  which = jnp.sum(jnp.asarray(sizes[:-1], jnp.int32) < total) if len(sizes) > 1 else 0
+  ids, kept = jax.lax.switch(which, [lambda z=z: lists(z) for z in sizes])
   # What was dropped: true pair counts per block against the kept ones.
   want = _rect_counts(y0, y1, x0, x1, ok & (rx >= 0.), (blocks_y, blocks_x)).ravel()
   lost = (want > jnp.minimum(kept, width_l)).reshape(blocks_y, blocks_x)
