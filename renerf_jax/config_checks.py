@@ -79,6 +79,8 @@ def check_config(c):
          f'Config.gs_init_opacity={c.gs_init_opacity} must lie in (0, 1)')
   _check(c.gs_tile_cap >= 0,
          f'Config.gs_tile_cap={c.gs_tile_cap} must be >= 0 (0: no cap)')
+  _check(c.gs_list_capacity >= 1,
+         f'Config.gs_list_capacity={c.gs_list_capacity} must be >= 1')
   _check(c.gs_extent >= 0., f'Config.gs_extent={c.gs_extent} must be >= 0')
   for name in ('gs_sh_interval_frac', 'gs_densify_every_frac',
                'gs_opacity_reset_every_frac'):

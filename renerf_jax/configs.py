@@ -142,8 +142,13 @@ class Config:
   # Their scale: 3DGS's 3-nearest-neighbour distance (else the box spacing, box side /
   # gs_init_points^(1/3)).
   gs_init_knn: bool = gaussians(True)
-  # At most this many Gaussians (the nearest) per 16x16 tile; 0: all.
+  # At most this many Gaussians (the nearest) per 16x16 tile; 0: all (up to the capacity).
   gs_tile_cap: int = gaussians(0)
+  # With gs_tile_cap 0, the rasteriser's pair buffer: K x this (8x8 pixel block,
+  # Gaussian) pairs per image (K blocks), at most 2x this in one block; where it binds
+  # the farthest are dropped and the tiles count in the cap-bound fraction. A fresh
+  # 100k-Gaussian fern at 126x94 needs 1464 on average (20k: 622).
+  gs_list_capacity: int = gaussians(2048)
   # Scene extent (lr, densify sizes); 0: 3DGS's 1.1 x camera radius.
   gs_extent: float = gaussians(0.)
   # SH degree +1 every this (3DGS: 1000), to 3.

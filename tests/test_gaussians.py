@@ -95,9 +95,10 @@ def test_rasteriser_vjp_matches_autodiff_of_the_dense_reference(chunk):
     ids, count = tiles.tile_intersect(f64(proj.means2d), f64(proj.radius), args[4],
                                       proj.valid, H, W, cap=0)
     assert ids.shape == (4, 150) and int(count.max()) > 3 * chunk
-    _, _, _, stop_slot, k = rasterize._forward(jnp.asarray(ids), *args, H, W, 16, chunk)
-    ended = np.asarray(stop_slot) < 150
+    ended, walked, length = rasterize.walk(ids, *args, H, W, chunk=chunk)
+    ended = np.asarray(ended)
     assert ended.any() and not ended.all()  # Some pixels end early, some do not.
+    assert int(length.max()) > 2 * chunk and int(walked.max()) > 2  # Lists span chunks.
     rng = np.random.default_rng(1)
     wts = [jnp.asarray(rng.normal(size=s)) for s in [(H, W, 3), (H, W), (H, W)]]
 

@@ -1,17 +1,61 @@
 """3DGS's photometric loss, (1 - l) L1 + l (1 - SSIM), with per-pixel masks."""
+import functools
+
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from renerf_jax import metrics
 
 
+def _band(taps, n):
+  """[n - len(taps) + 1, n] matrix whose row i holds the taps at columns i .. i + len - 1."""
+  k = len(taps)
+  band = np.zeros((n - k + 1, n), np.float32)
+  for i in range(n - k + 1):
+    band[i, i:i + k] = taps
+  return band
+
+
+def _blur_matmul(x, taps):
+  """Separable 'valid' filtering of [H, W, C] by `taps` along H and W: two products
+  with banded matrices."""
+  band_h = jnp.asarray(_band(taps, x.shape[0]), x.dtype)
+  band_w = jnp.asarray(_band(taps, x.shape[1]), x.dtype)
+  x = jnp.einsum('hi,iwc->hwc', band_h, x, precision=jax.lax.Precision.HIGHEST)
+  return jnp.einsum('vw,hwc->hvc', band_w, x, precision=jax.lax.Precision.HIGHEST)
+
+
 def _blur_valid(x, taps):
-  """Separable 'valid' filtering of [H, W, C] by `taps` along H and W."""
-  for axis in (0, 1):
-    n_out = x.shape[axis] - len(taps) + 1
-    x = sum(float(w) * jax.lax.slice_in_dim(x, k, k + n_out, axis=axis)
-            for k, w in enumerate(taps))
-  return x
+  """_blur_matmul, whose gradient is the two transposed banded products.
+
+  Sums of shifted slices, and autodiff of them, fuse badly on XLA's CPU backend: on a
+  126x94 image the SSIM loss took ~7 ms with that forward (and 40 ms with its autodiff
+  gradient), 0.7 ms with banded products both ways. The products sum the taps in
+  another order: SSIM values move by ~2e-6, float32 rounding (both orders are that far
+  from a float64 evaluation).
+  """
+  taps = tuple(float(w) for w in taps)
+  return _blur_custom(x, taps)
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(1,))
+def _blur_custom(x, taps):
+  return _blur_matmul(x, taps)
+
+
+def _blur_fwd(x, taps):
+  return _blur_matmul(x, taps), x.shape
+
+
+def _blur_bwd(taps, shape, g):
+  band_h = jnp.asarray(_band(taps, shape[0]), g.dtype)
+  band_w = jnp.asarray(_band(taps, shape[1]), g.dtype)
+  g = jnp.einsum('jw,ijc->iwc', band_w, g, precision=jax.lax.Precision.HIGHEST)
+  return (jnp.einsum('ih,iwc->hwc', band_h, g, precision=jax.lax.Precision.HIGHEST),)
+
+
+_blur_custom.defvjp(_blur_fwd, _blur_bwd)
 
 
 def masked_ssim_map(img0, img1, mask):

@@ -4,6 +4,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
+from renerf_jax.gaussians import blocks
 from renerf_jax.gaussians import params
 from renerf_jax.gaussians import projection
 from renerf_jax.gaussians import rasterize as rasterize_lib
@@ -31,10 +32,13 @@ def sanitise(gaussians):
       opacity_logits=keep(g.opacity_logits), sh=keep(g.sh), active=active)
 
 
-@functools.partial(jax.jit,
-                   static_argnames=('height', 'width', 'sh_degree', 'cap', 'tile'))
+CAPACITY = 2048  # Config.gs_list_capacity's default.
+
+
+@functools.partial(jax.jit, static_argnames=('height', 'width', 'sh_degree', 'cap', 'tile',
+                                             'capacity'))
 def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, cap=64,
-           near=0.01, tile=16, means2d_offset=None):
+           near=0.01, tile=16, means2d_offset=None, capacity=CAPACITY):
   """Renders an image of the Gaussians.
 
   The gradient of a loss with respect to `means2d_offset` (pass zeros) is the
@@ -49,7 +53,11 @@ def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, c
     sh_degree: static SH degree used for colour, 0..3.
     background: [3] colour (default black).
     cap: static maximum number of Gaussians blended per tile (the nearest); 0: no cap,
-      every Gaussian that touches a tile is blended.
+      every Gaussian that touches a tile is blended, up to the capacity.
+    capacity: static, with cap 0: the lists of the 8x8 pixel blocks hold K * capacity
+      (Gaussian, block) pairs in all (K blocks), at most 2 * capacity in one block
+      (blocks.pair_lists); where it binds the farthest are dropped (cap_bound says
+      where).
     near: near-plane depth.
     tile: static tile size.
     means2d_offset: optional [N, 2] pixel offset added to the projected means (zeros:
@@ -58,7 +66,8 @@ def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, c
   Returns:
     dict with rgb [H, W, 3], depth [H, W] (weighted sum of view depths, unnormalised:
     depth / acc is the expected depth), acc [H, W] (1 - final transmittance), cap_bound
-    (fraction of tiles with more than `cap` Gaussians), count [T] (Gaussians per tile),
+    (fraction of tiles with more than `cap` Gaussians, or, with cap 0, where the
+    capacity dropped some), count [T] (Gaussians per tile),
     valid [N] and radius [N] (the projection's culling mask and pixel radii).
   """
   dtype = gaussians.means.dtype
@@ -69,14 +78,23 @@ def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, c
                             height, width, near)
   colours = params.eval_sh(sh_degree, g.sh, g.means - c2w[:3, 3])
   opacities = jax.nn.sigmoid(g.opacity_logits)
-  ids, count = tiles.tile_intersect(proj.means2d, proj.radius, proj.depths, proj.valid,
-                                    height, width, tile, cap)
   means2d = proj.means2d
   if means2d_offset is not None:
     means2d = means2d + jnp.where(proj.valid[:, None], means2d_offset, 0.)
-  rgb, depth, acc = rasterize_lib.rasterize(ids, means2d, proj.conics, colours,
-                                            opacities, proj.depths, height, width,
-                                            background, tile)
-  cap_bound = jnp.mean(count > cap) if cap else jnp.zeros((), dtype)
+  if cap:
+    ids, count = tiles.tile_intersect(proj.means2d, proj.radius, proj.depths, proj.valid,
+                                      height, width, tile, cap)
+    rgb, depth, acc = rasterize_lib.rasterize(ids, means2d, proj.conics, colours,
+                                              opacities, proj.depths, height, width,
+                                              background, tile)
+    cap_bound = jnp.mean(count > cap)
+  else:
+    ids, length, count, bound = blocks.pair_lists(
+        proj.means2d, proj.radius, proj.conics, opacities, proj.depths, proj.valid,
+        height, width, tile, min(rasterize_lib.BLOCK, tile), capacity)
+    rgb, depth, acc = rasterize_lib.rasterize_blocks(
+        ids, length, means2d, proj.conics, colours, opacities, proj.depths, height,
+        width, background, tile)
+    cap_bound = jnp.mean(bound.astype(dtype))
   return dict(rgb=rgb, depth=depth, acc=acc, cap_bound=cap_bound,
               count=count, valid=proj.valid, radius=proj.radius)

@@ -1,5 +1,9 @@
 """Tile intersection: which Gaussians touch which 16x16 tile, front to back.
 
+`render` uses these lists with a tile cap (Config.gs_tile_cap > 0); without one it
+builds 8x8 block lists directly (blocks.pair_lists), whose every pair is one of these
+lists' (tests/test_gaussians_raster.py).
+
 Static shapes: the image is cut into T = ceil(H / tile) * ceil(W / tile) tiles in
 row-major order (tile t covers columns [tx * tile, (tx + 1) * tile) and rows
 [ty * tile, (ty + 1) * tile), t = ty * tiles_x + tx), and each tile keeps a list of

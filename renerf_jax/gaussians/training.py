@@ -179,7 +179,8 @@ def render_for_loss(config, cam, params, fields, offset, pose, degree):
   g = from_fields(fields, params.active)
   g = g.replace(sh=g.sh * sh_mask(degree))
   return render_lib.render(g, pose, cam.focal, cam.h, cam.w, 3, background(config),
-                           config.gs_tile_cap, NEAR, TILE, means2d_offset=offset)
+                           config.gs_tile_cap, NEAR, TILE, means2d_offset=offset,
+                           capacity=config.gs_list_capacity)
 
 
 def loss_and_grads(config, cam, params, image, pose, mask, degree):
@@ -349,7 +350,8 @@ def train_gaussians(config, scene, out_dir, pseudo, window=(0, 0), init_params=N
 @functools.partial(jax.jit, static_argnums=(0, 1))
 def _render_one(config, cam, params, pose):
   out = render_lib.render(params, pose, cam.focal, cam.h, cam.w, 3, background(config),
-                          config.gs_tile_cap, NEAR, TILE)
+                          config.gs_tile_cap, NEAR, TILE,
+                          capacity=config.gs_list_capacity)
   acc = out['acc']
   depth = jnp.where(acc > 0., out['depth'] / jnp.where(acc > 0., acc, 1.), 0.)
   return {'rgb': out['rgb'], 'depth': depth, 'acc': acc}
