@@ -40,7 +40,8 @@ def main(argv=None):
   print(table)
   for line in deltas:
     print(line)
-  print(f'picture of test view 0 (photo, then each row): {rundir.comparison_path(run_dir)}')
+  print('the test view farthest from the training cameras, photo then each row: '
+        f'{rundir.comparison_path(run_dir)}')
 
 
 if __name__ == '__main__':

@@ -146,8 +146,10 @@ class Config:
   gs_tile_cap: int = gaussians(0)
   # With gs_tile_cap 0, the rasteriser's pair buffer: K x this (8x8 pixel block,
   # Gaussian) pairs per image (K blocks), at most 2x this in one block; where it binds
-  # the farthest are dropped and the tiles count in the cap-bound fraction. A fresh
-  # 100k-Gaussian fern at 126x94 needs 1464 on average (20k: 622).
+  # the farthest are dropped (with the whole buffer full, the image's farthest pairs
+  # first, from any block) and the tiles count in the cap-bound fraction that the
+  # training log records. A fresh 100k-Gaussian fern at 126x94 needs 1464 on average
+  # (20k: 622): raise it with gs_capacity far above 100k or large images.
   gs_list_capacity: int = gaussians(2048)
   # Scene extent (lr, densify sizes); 0: 3DGS's 1.1 x camera radius.
   gs_extent: float = gaussians(0.)

@@ -59,7 +59,7 @@ def control_config(config, steps=None):
   pseudo-views) with D's Config (round_config(config, 1): D's seed and initialisation)
   for `steps` steps (None: B's). It differs from R1 in the pseudo-views alone."""
   return dataclasses.replace(round_config(config, 1), num_rounds=0, seed_control=False,
-                             max_steps=steps or config.max_steps)
+                             max_steps=config.max_steps if steps is None else steps)
 
 
 def round_step(config, scene, state: RoundState, show_progress: bool = False,
@@ -124,6 +124,10 @@ def check_rounds_config(config, scene):
   metrics.check_lpips_size(config.lpips_nets, scene.height, scene.width)
   if config.num_rounds > 0:
     pseudo_view_poses(config, scene)
+    if config.seed_control and config.renerf_init != 'reset':
+      raise ConfigError(f'Config.seed_control trains D from scratch at D\'s seed; with '
+                        f'Config.renerf_init={config.renerf_init!r} D starts from B, so that '
+                        'control would differ from R1 in more than the pseudo-views')
     if (config.backbone != 'nerf' and config.use_masks
         and config.mask_signal != 'one_minus_acc'):
       raise ConfigError(f'Config.mask_signal={config.mask_signal!r} needs the NeRF '

@@ -224,17 +224,29 @@ def run_control(config, scene, run_dir, state: renerf.RoundState,
                     show_progress, label='control').metrics[0]
 
 
+def hardest_test_view(scene) -> int:
+  """The position in scene.test_idx of the test camera farthest from every training
+  camera (camera centres)."""
+  centres = scene.poses[:, :3, 3]
+  gaps = np.linalg.norm(centres[scene.test_idx, None] - centres[None, scene.train_idx],
+                        axis=-1).min(1)
+  return int(np.argmax(gaps))
+
+
 def save_comparison(run_dir, scene, rows: Sequence):
-  """Writes rundir.comparison_path(run_dir): the first test view's photo beside the
-  renders of `rows`, (title, round directory) pairs of finished rounds, each titled with
-  its PSNR on that view (read from the rounds' eval/ files, process 0 only)."""
+  """Writes rundir.comparison_path(run_dir): the photo of the test view farthest from
+  the training cameras beside the renders of `rows`, (title, round directory) pairs of
+  finished rounds, each titled with its PSNR on that view (read from the rounds' eval/
+  files, process 0 only)."""
   if not distributed.is_writer():
     return
   import imageio.v3 as iio  # pylint: disable=g-import-not-at-top
-  images, titles = [scene.images[scene.test_idx[0]]], ['photo (test view 0)']
+  k = hardest_test_view(scene)
+  images = [scene.images[scene.test_idx[k]]]
+  titles = [f'photo (test view {k}, the farthest from training cameras)']
   for title, rdir in rows:
     ev_dir = rundir.eval_dir(rdir)
-    m = report.read_json(rundir.metrics_path(ev_dir))['per_image'][0]
+    m = report.read_json(rundir.metrics_path(ev_dir))['per_image'][k]
     images.append(iio.imread(rundir.render_path(ev_dir, m['name'])))
     titles.append(f"{title}: {m['psnr']:.2f} dB")
   figures.save_panels(rundir.comparison_path(run_dir), images, titles)

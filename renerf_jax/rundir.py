@@ -68,7 +68,7 @@ def control_dir(run_dir):
 
 
 def comparison_path(run_dir):
-  """train.py's picture of one test view: photo | B | control | R1."""
+  """train.py's picture of a test view: photo | B | control | R1."""
   return os.path.join(run_dir, 'comparison.png')
 
 

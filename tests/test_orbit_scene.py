@@ -78,9 +78,10 @@ def test_split_orbit_and_scene_path():
   assert gaps.max() < 2 * np.pi / len(scene.train_idx) * 1.5
   for i in scene.test_idx:  # No test camera coincides with a training camera.
     assert np.min(np.linalg.norm(centres[scene.train_idx] - centres[i], axis=-1)) > 0.05
-  lo, hi = np.array(scene.bbox)
-  objects = (np.array([[-0.72, -0.45, 0.], [0.87, 0.92, 0.95]]) - orbit._TARGET) / 3.2
-  assert np.all(lo <= objects.min(0)) and np.all(objects.max(0) <= hi)
+  # The floor disc's box, moved and scaled with the cameras.
+  _, centre, scale = normalize_poses(orbit.camera_poses(48))
+  np.testing.assert_allclose(np.array(scene.bbox), (np.array(
+      [[-2.2, -2.2, -0.1], [2.2, 2.2, 1.2]]) - centre) * scale, rtol=1e-6, atol=1e-7)
   assert not scene.use_ndc and not scene.forward_facing and scene.intrinsics is None
   assert scene.depths.shape == scene.images.shape[:3] and np.all(scene.depths > 0)
 
@@ -91,3 +92,17 @@ def test_orbit_loader_is_selectable_and_checked():
                             normalize_poses=True))
   assert scene.images.shape == (16, 16, 20, 3) and scene.name == 'orbit'
   assert 0. <= scene.images.min() and scene.images.max() <= 1.
+
+
+def test_comparison_shows_the_test_view_farthest_from_training_cameras():
+  from renerf_jax.datasets import Scene  # pylint: disable=g-import-not-at-top
+  from renerf_jax.round_driver import hardest_test_view  # pylint: disable=g-import-not-at-top
+  poses = np.zeros((6, 3, 4), np.float32)
+  poses[:, :3, :3] = np.eye(3)
+  poses[:, 0, 3] = [0., 1., 2., 0.1, 5., 1.5]
+  scene = Scene(name='line', images=np.zeros((6, 4, 4, 3), np.float32), poses=poses,
+                focal=4., near=0., far=1., use_ndc=False, white_bkgd=False,
+                train_idx=np.array([0, 1, 2]), test_idx=np.array([3, 4, 5]))
+  assert hardest_test_view(scene) == 1
+  scene = dataclasses.replace(scene, test_idx=np.array([5, 3]))
+  assert hardest_test_view(scene) == 0

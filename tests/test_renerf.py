@@ -335,11 +335,15 @@ def test_round_config_d_seed_policies_and_init_seed_keys():
   np.testing.assert_array_equal(k_init, ref[0])
   np.testing.assert_array_equal(k_step, np.asarray(jax.random.split(jax.random.PRNGKey(9)))[1])
   # The seed-matched control: round 1's Config with no rounds, B's steps or the given.
-  c = renerf.control_config(Config(seed=3, num_rounds=2, seed_control=True, max_steps=50))
-  assert c == Config(seed=1003, num_rounds=0, seed_control=False, max_steps=50)
-  assert renerf.control_config(Config(seed=3, max_steps=50), 100).max_steps == 100
+  c = renerf.control_config(Config(seed=3, num_rounds=2, seed_control=True))
+  assert c == Config(seed=1003, num_rounds=0, seed_control=False)
+  assert renerf.control_config(Config(seed=3), 2 * c.max_steps).max_steps == 2 * c.max_steps
   assert renerf.control_config(Config(seed=3, d_seed='same')) == Config(seed=3,
                                                                         d_seed='same')
+  with pytest.raises(ConfigError, match="Config.renerf_init='continue'"):
+    renerf.check_rounds_config(tiny_config(num_rounds=1, seed_control=True,
+                                           renerf_init='continue'),
+                               load_scene(tiny_config()))
   with pytest.raises(ConfigError, match="Config.d_seed='new'"):
     Config(d_seed='new')
   with pytest.raises(ConfigError, match='Config.init_seed=-2'):

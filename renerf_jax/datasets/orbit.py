@@ -5,19 +5,22 @@ inside an environment dome (radius 7: a sky gradient over a mountain band, whose
 depth is finite), lit by one directional light with hard shadows and ambient light. The
 cameras circle the objects at distance 3.2 on a wavy orbit (elevation 16 to 40 degrees),
 looking at (0, 0, 0.35); world z is up. Every Config.llffhold-th camera is a test view
-and Config.n_input_views training views are spread over the others
-(`scene.fewshot_split`, as for a transforms.json capture), so the few-shot cameras are
-about 360 / n_input_views degrees apart and the test views sit between them.
+and Config.n_input_views training views are spread over the others as over a
+transforms.json capture's (`scene.fewshot_split`: evenly from the first to the last, so
+on the closed orbit the last and the first are closer: with 48 cameras and 12 views the
+gaps are 30 to 37.5 degrees and one of 15), the test views between them.
 
 It is a small stand-in for the wide-baseline captures (lego, fox): occlusions seen from
 all sides, texture at several scales, a background that is neither empty nor at one
 depth. The rendered cameras go through the transforms.json loader's Scene path
 (`transforms.object_scene`: pose normalisation, the scene box, unbounded contraction as
-the config asks), and the exact z-depth maps are kept (Scene.depths).
+the config asks), and the z-depth maps are kept (Scene.depths: exact per sub-pixel ray,
+averaged over each pixel's 2x2 like the colours).
 """
 import numpy as np
 
 from renerf_jax import cameras
+from renerf_jax.datasets.procedural import camera_directions, palette
 from renerf_jax.datasets.scene import Scene, fewshot_split
 from renerf_jax.datasets.transforms import object_scene
 
@@ -35,12 +38,6 @@ _TARGET = np.array([0., 0., 0.35])
 _ORBIT_RADIUS = 3.2
 # Surface kinds: 0 dome, 1 floor, 2 box, 3 cylinder, 4 + s the spheres.
 DOME, FLOOR, BOX, CYLINDER, SPHERE = 0, 1, 2, 3, 4
-
-
-def _palette(t, phase):
-  """Smooth colourful palette, t and phase broadcastable -> [..., 3] in [0, 1]."""
-  return 0.5 + 0.45 * np.cos(t[..., None] + np.asarray(phase)[..., None] +
-                             np.array([0., 2.1, 4.2]))
 
 
 def _hit_spheres(origins, dirs, t_best, kind, normals):
@@ -147,20 +144,20 @@ def _albedo(points, kind):
   sel = kind == FLOOR  # Tiles of two scales, hue varying across the floor.
   checker = (np.floor(x[sel] * 2.5) + np.floor(y[sel] * 2.5)) % 2
   fine = (np.floor(x[sel] * 10.) + np.floor(y[sel] * 10.)) % 2
-  out[sel] = (0.45 + 0.35 * checker + 0.1 * fine)[:, None] * _palette(
+  out[sel] = (0.45 + 0.35 * checker + 0.1 * fine)[:, None] * palette(
       0.8 * np.hypot(x[sel], y[sel]), np.full(checker.shape, 1.2))
   sel = kind == BOX
   stripes = 0.5 + 0.5 * np.sign(np.sin(12. * (x[sel] + y[sel]) + 9. * z[sel]))
   out[sel] = (0.3 + 0.6 * stripes)[:, None] * np.array([0.85, 0.45, 0.3])
   sel = kind == CYLINDER
   angle = np.arctan2(y[sel] - _CYLINDER[1], x[sel] - _CYLINDER[0])
-  out[sel] = _palette(3. * np.sign(np.sin(6. * angle)) + 4. * z[sel],
+  out[sel] = palette(3. * np.sign(np.sin(6. * angle)) + 4. * z[sel],
                       np.full(angle.shape, 4.4))
   for s, (cx, cy, cz, _, freq, phase) in enumerate(_SPHERES):
     sel = kind == SPHERE + s
     local = points[sel] - np.array([cx, cy, cz])
     pattern = np.sin(freq * local[:, 0]) * np.cos(freq * local[:, 1]) + 2. * local[:, 2]
-    out[sel] = _palette(2.5 * pattern, np.full(pattern.shape, phase))
+    out[sel] = palette(2.5 * pattern, np.full(pattern.shape, phase))
   return out
 
 
@@ -195,9 +192,7 @@ def render_views(poses, h, w, focal, supersample=2):
     supersample^2 sub-pixel rays.
   """
   ss = supersample
-  ys, xs = np.meshgrid(np.arange(h * ss), np.arange(w * ss), indexing='ij')
-  dirs_cam = np.stack([(xs + 0.5 - 0.5 * w * ss) / (focal * ss),
-                       -(ys + 0.5 - 0.5 * h * ss) / (focal * ss), -np.ones(xs.shape)], -1)
+  dirs_cam = camera_directions(h, w, focal, ss)
   norm = np.linalg.norm(dirs_cam, axis=-1)
   images, depths = [], []
   for c2w in poses:

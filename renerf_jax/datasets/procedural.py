@@ -25,7 +25,7 @@ _FLOOR_Y = -1.45
 _LIGHT = np.array([0.45, 0.7, 0.55]) / np.linalg.norm([0.45, 0.7, 0.55])
 
 
-def _palette(t, phase):
+def palette(t, phase):
   """Smooth colourful palette, t and phase broadcastable -> [..., 3] in [0, 1]."""
   offsets = np.array([0., 2.1, 4.2])
   return 0.5 + 0.45 * np.cos(t[..., None] + phase[..., None] + offsets)
@@ -37,7 +37,7 @@ def _shade(points, normals, kind, param):
   albedo = np.zeros(points.shape)
   wall = kind == 0
   checker = (np.floor(x[wall] * 2.) + np.floor(y[wall] * 2.)) % 2
-  albedo[wall] = _palette(1.7 * np.sin(1.3 * x[wall]) + 2.3 * np.cos(0.9 * y[wall]) +
+  albedo[wall] = palette(1.7 * np.sin(1.3 * x[wall]) + 2.3 * np.cos(0.9 * y[wall]) +
                           1.5 * checker, np.full(checker.shape, 0.5))
   floor = kind == 1
   stripes = 0.5 + 0.5 * np.sign(np.sin(4. * x[floor] + 2. * z[floor]))
@@ -47,7 +47,7 @@ def _shade(points, normals, kind, param):
     cx, cy, cz, _, freq, phase = _SPHERES[s]
     local = points[sel] - np.array([cx, cy, cz])
     pattern = np.sin(freq * local[..., 0]) * np.cos(freq * local[..., 1]) + 2. * local[..., 2]
-    albedo[sel] = _palette(2.5 * pattern, np.full(pattern.shape, phase))
+    albedo[sel] = palette(2.5 * pattern, np.full(pattern.shape, phase))
   lambert = np.clip(np.sum(normals * _LIGHT, -1), 0., 1.)
   return albedo * (0.35 + 0.65 * lambert[..., None])
 
@@ -93,12 +93,19 @@ def camera_poses(n_views):
   return np.stack(poses)
 
 
+def camera_directions(h, w, focal, supersample):
+  """Directions (camera frame, OpenGL: x right, y up, z = -1) through the centres of the
+  supersample^2 sub-pixels of every pixel of a centred pinhole. [H ss, W ss, 3]."""
+  ss = supersample
+  ys, xs = np.meshgrid(np.arange(h * ss), np.arange(w * ss), indexing='ij')
+  return np.stack([(xs + 0.5 - 0.5 * w * ss) / (focal * ss),
+                   -(ys + 0.5 - 0.5 * h * ss) / (focal * ss), -np.ones(xs.shape)], -1)
+
+
 def render_views(poses, h, w, focal, supersample=2):
   """Ray-casts the scene. Returns (images [N, H, W, 3], z-depths [N, H, W])."""
   ss = supersample
-  ys, xs = np.meshgrid(np.arange(h * ss), np.arange(w * ss), indexing='ij')
-  dirs_cam = np.stack([(xs + 0.5 - 0.5 * w * ss) / (focal * ss),
-                       -(ys + 0.5 - 0.5 * h * ss) / (focal * ss), -np.ones(xs.shape)], -1)
+  dirs_cam = camera_directions(h, w, focal, ss)
   images, depths = [], []
   for c2w in poses:
     dirs = dirs_cam @ c2w[:3, :3].T

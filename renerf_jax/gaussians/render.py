@@ -89,12 +89,13 @@ def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, c
                                               background, tile)
     cap_bound = jnp.mean(count > cap)
   else:
+    block = min(rasterize_lib.BLOCK, tile)
     ids, length, count, bound = blocks.pair_lists(
         proj.means2d, proj.radius, proj.conics, opacities, proj.depths, proj.valid,
-        height, width, tile, min(rasterize_lib.BLOCK, tile), capacity)
+        height, width, tile, block, capacity)
     rgb, depth, acc = rasterize_lib.rasterize_blocks(
         ids, length, means2d, proj.conics, colours, opacities, proj.depths, height,
-        width, background, tile)
+        width, background, tile, block=block)
     cap_bound = jnp.mean(bound.astype(dtype))
   return dict(rgb=rgb, depth=depth, acc=acc, cap_bound=cap_bound,
               count=count, valid=proj.valid, radius=proj.radius)

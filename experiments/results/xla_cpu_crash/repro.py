@@ -92,7 +92,7 @@ def main(which, path):
       config, params, rays, -1., 1., 1)['gn'])
   print(f'forward-mode reference ok ({time.time() - t:.0f} s), max |h - ref - 2 lam| / '
         f'max ref = {np.max(np.abs(h - ref - 2e-4)) / ref.max():.2e}', flush=True)
-  demo = load_config([os.path.join(REPO, 'gin_configs', 'demo.gin')], [
+  demo = load_config([os.path.join(REPO, 'gin_configs', 'demo_llff.gin')], [
       'Config.use_masks = True', "Config.mask_signal = 'laplace'",
       'Config.hessian_rays = 2048', "Config.interp_factors = '0.5'"])
   demo_scene = load_scene(demo)
