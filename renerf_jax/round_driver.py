@@ -243,7 +243,7 @@ def save_comparison(run_dir, scene, rows: Sequence):
   import imageio.v3 as iio  # pylint: disable=g-import-not-at-top
   k = hardest_test_view(scene)
   images = [scene.images[scene.test_idx[k]]]
-  titles = [f'photo (test view {k}, the farthest from training cameras)']
+  titles = [f'photo, test view {k}']
   for title, rdir in rows:
     ev_dir = rundir.eval_dir(rdir)
     m = report.read_json(rundir.metrics_path(ev_dir))['per_image'][k]
