@@ -33,8 +33,8 @@ def main(argv=None):
   report.write_markdown(md_path, table + '\n' + ''.join(f'\n{d}\n' for d in deltas))
   rows = [('B', rundir.round_dir(run_dir, 0))]
   if control is not None:
-    rows.append(('control', rundir.round_dir(
-        run_dir if config.d_seed == 'same' else rundir.control_dir(run_dir), 0)))
+    rows.append(('control', rundir.round_dir(round_driver.control_run_dir(config, run_dir),
+                                             0)))
   rows += [(f'R{r}', rundir.round_dir(run_dir, r)) for r in range(1, config.num_rounds + 1)]
   round_driver.save_comparison(run_dir, scene, rows)
   print(table)

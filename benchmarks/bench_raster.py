@@ -34,7 +34,6 @@ from benchmarks.bench_throughput import time_calls
 from benchmarks.raster_old import loss as old_loss
 from benchmarks.raster_old import rasterize as old_rasterize
 from benchmarks.raster_old import render as old_render
-from benchmarks.raster_old import tiles as old_tiles
 from experiments.tables import command_line
 from renerf_jax import report
 from renerf_jax.configs import load_config
@@ -46,6 +45,7 @@ from renerf_jax.gaussians import projection
 from renerf_jax.gaussians import rasterize as new_rasterize
 from renerf_jax.gaussians import render as new_render
 from renerf_jax.gaussians import schedule
+from renerf_jax.gaussians import tiles
 from renerf_jax.gaussians import training as gtrain
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -54,8 +54,8 @@ TILE = gtrain.TILE
 
 def _old_bin(proj, opac, h, w, cap):
   del opac
-  return old_tiles.tile_intersect(proj.means2d, proj.radius, proj.depths, proj.valid, h,
-                                  w, TILE, cap)[0]
+  return tiles.tile_intersect(proj.means2d, proj.radius, proj.depths, proj.valid, h, w,
+                              TILE, cap)[0]
 
 
 def _old_blend(lists, means2d, conics, colours, opac, depths, h, w, bg):

@@ -182,7 +182,8 @@ def _lpips_net_name(net):
 
 def check_lpips_size(lpips_nets, height, width):
   """Raises ConfigError when Config.lpips_nets asks for LPIPS-alex on images smaller
-  than LPIPS_ALEX_MIN_SIZE per side (before any training, not at the first evaluation)."""
+  than LPIPS_ALEX_MIN_SIZE per side (AlexNet pools them away); renerf.check_rounds_config
+  calls it before any training, image_metrics at every evaluation."""
   if (any(_lpips_net_name(n) == 'alexnet' for n in lpips_nets)
       and min(height, width) < LPIPS_ALEX_MIN_SIZE):
     raise ConfigError(f'Config.lpips_nets={tuple(lpips_nets)!r}: LPIPS-alex needs images of '
@@ -300,11 +301,9 @@ def image_metrics(pred, gt,
       'psnr': float(psnr(pred, gt)),
       'ssim': float(_ssim_jit(pred, gt)),
   }
+  check_lpips_size(lpips_nets, *pred.shape[-3:-1])
   for net in lpips_nets:
     short = 'alex' if _lpips_net_name(net) == 'alexnet' else 'vgg'
-    if short == 'alex' and min(pred.shape[-3:-1]) < LPIPS_ALEX_MIN_SIZE:
-      raise ValueError(f'LPIPS-alex needs images of at least {LPIPS_ALEX_MIN_SIZE} px per '
-                       f'side (AlexNet pools them away below that), got {pred.shape[-3:-1]}')
     out[f'lpips_{short}'] = LPIPS(net)(pred, gt)
   if 'lpips_alex' in out:
     out['avg_err'] = float(avg_err(out['psnr'], out['ssim'], out['lpips_alex']))

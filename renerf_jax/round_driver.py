@@ -204,10 +204,17 @@ def run_rounds(config, scene, run_dir, show_progress=True,
   return state
 
 
+def control_run_dir(config, run_dir):
+  """The run directory whose round_0 is round 1's seed-matched control: with
+  Config.d_seed = 'same' the control is B itself (the same Config), so the run's own;
+  else rundir.control_dir(run_dir)."""
+  return run_dir if config.d_seed == 'same' else rundir.control_dir(run_dir)
+
+
 def run_control(config, scene, run_dir, state: renerf.RoundState,
                 show_progress=True) -> dict:
   """The seed-matched control of round 1 (renerf.control_config) in
-  rundir.control_dir(run_dir), resuming what is there.
+  control_run_dir(config, run_dir), resuming what is there.
 
   Args:
     config, scene: the run's Config and Scene. run_dir: the run directory.
@@ -215,13 +222,13 @@ def run_control(config, scene, run_dir, state: renerf.RoundState,
     show_progress: draw progress bars.
 
   Returns:
-    The control's test metrics; with Config.d_seed = 'same' the control is B itself
-    (the same Config), whose metrics are returned without training it again.
+    The control's test metrics (B's, not trained again, where the control is B).
   """
-  if config.d_seed == 'same':
+  control_dir = control_run_dir(config, run_dir)
+  if control_dir == run_dir:
     return state.metrics[0]
-  return run_rounds(renerf.control_config(config), scene, rundir.control_dir(run_dir),
-                    show_progress, label='control').metrics[0]
+  return run_rounds(renerf.control_config(config), scene, control_dir, show_progress,
+                    label='control').metrics[0]
 
 
 def hardest_test_view(scene) -> int:

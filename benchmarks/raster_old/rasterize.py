@@ -31,7 +31,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from benchmarks.raster_old import tiles as tiles_lib
+from renerf_jax.gaussians import tiles as tiles_lib
 
 ALPHA_MIN = 1. / 255.
 ALPHA_MAX = 0.99

@@ -6,29 +6,9 @@ import jax.numpy as jnp
 
 from renerf_jax.gaussians import params
 from renerf_jax.gaussians import projection
+from renerf_jax.gaussians import tiles
+from renerf_jax.gaussians.render import sanitise
 from benchmarks.raster_old import rasterize as rasterize_lib
-from benchmarks.raster_old import tiles
-
-
-def sanitise(gaussians):
-  """Marks slots with any non-finite field inactive and zeroes all inactive fields.
-
-  Double-where: whatever an inactive slot holds (NaN included) reaches neither the image
-  nor any gradient; its gradients are exactly zero.
-  """
-  g = gaussians
-  finite = (jnp.all(jnp.isfinite(g.means), -1) & jnp.all(jnp.isfinite(g.log_scales), -1) &
-            jnp.all(jnp.isfinite(g.quats), -1) & jnp.isfinite(g.opacity_logits) &
-            jnp.all(jnp.isfinite(g.sh), (-1, -2)))
-  active = g.active & finite
-
-  def keep(x, default=0.):
-    return jnp.where(active.reshape((-1,) + (1,) * (x.ndim - 1)), x, default)
-
-  return params.Gaussians(
-      means=keep(g.means), log_scales=keep(g.log_scales),
-      quats=keep(g.quats, jnp.array([1., 0., 0., 0.], g.quats.dtype)),
-      opacity_logits=keep(g.opacity_logits), sh=keep(g.sh), active=active)
 
 
 @functools.partial(jax.jit,

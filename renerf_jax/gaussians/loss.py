@@ -58,7 +58,7 @@ def _blur_bwd(taps, shape, g):
 _blur_custom.defvjp(_blur_fwd, _blur_bwd)
 
 
-def masked_ssim_map(img0, img1, mask):
+def masked_ssim_map(img0, img1, mask, blur=_blur_valid):
   """SSIM map of metrics.ssim_map (11x11 Gaussian window, sigma 1.5, 'valid') whose
   local statistics are weighted by a pixel mask: a pixel of weight 0 enters no window.
 
@@ -69,6 +69,8 @@ def masked_ssim_map(img0, img1, mask):
 
   Args:
     img0, img1: [H, W, 3] (H, W >= 11). mask: [H, W] weights in [0, 1].
+    blur: (x [H, W, C], taps) -> the separable 'valid' filtering of x (_blur_valid;
+      benchmarks/raster_old passes the slice sums it had before issue 51).
 
   Returns:
     (ssim [H - 10, W - 10, 3], weight [H - 10, W - 10, 1]: the centre pixels' mask).
@@ -78,12 +80,12 @@ def masked_ssim_map(img0, img1, mask):
   m = mask[..., None]
   centre = m[r:m.shape[0] - r, r:m.shape[1] - r]
   use = centre > 0.
-  bm = _blur_valid(m, taps)
+  bm = blur(m, taps)
   safe = lambda x, fill: jnp.where(use, x, fill)
   norm = safe(bm, 1.)
 
   def avg(x):  # Mask-weighted local mean; constants outside `use` (no gradient there).
-    return safe(_blur_valid(m * x, taps), 0.) / norm
+    return safe(blur(m * x, taps), 0.) / norm
 
   mu0, mu1 = avg(img0), avg(img1)
   s00 = jnp.maximum(0., avg(img0**2) - mu0**2)
@@ -95,7 +97,7 @@ def masked_ssim_map(img0, img1, mask):
   return ssim, centre
 
 
-def image_loss(rgb, target, mask, lambda_dssim):
+def image_loss(rgb, target, mask, lambda_dssim, blur=_blur_valid):
   """(1 - l) L1 + l (1 - SSIM) of a rendered image, pixels weighted by a mask.
 
   L1 = mean(m |rgb - target|) over all pixels and channels; 1 - SSIM = the mean over
@@ -108,14 +110,14 @@ def image_loss(rgb, target, mask, lambda_dssim):
 
   Args:
     rgb, target: [H, W, 3] (H, W >= 11). mask: [H, W] weights in [0, 1].
-    lambda_dssim: weight of the SSIM term.
+    lambda_dssim: weight of the SSIM term. blur: as masked_ssim_map's.
 
   Returns:
     (loss, masked MSE) scalars; the MSE is sum(m (rgb - target)^2) / (3 sum(m)).
   """
   m = mask[..., None]
   l1 = jnp.mean(m * jnp.abs(rgb - target))
-  ssim, weight = masked_ssim_map(rgb, target, mask)
+  ssim, weight = masked_ssim_map(rgb, target, mask, blur)
   dssim = jnp.sum(weight * (1. - ssim)) / ssim.size
   loss = (1. - lambda_dssim) * l1 + lambda_dssim * dssim
   mse = jnp.sum(m * (rgb - target)**2) / jnp.maximum(3. * jnp.sum(m), 1e-8)
