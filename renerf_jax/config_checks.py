@@ -97,6 +97,8 @@ def check_config(c):
          f'Config.gs_min_opacity={c.gs_min_opacity} must lie in [0, 1)')
   _check(0. <= c.gs_lambda_dssim <= 1.,
          f'Config.gs_lambda_dssim={c.gs_lambda_dssim} must lie in [0, 1]')
+  _check(0. <= c.gs_drop_rate < 1.,
+         f'Config.gs_drop_rate={c.gs_drop_rate} must lie in [0, 1)')
   _check(len(c.gs_background) == 3,
          f'Config.gs_background={c.gs_background!r} must be an RGB triple')
   _check(c.field in ('mlp', 'grid'), f'Config.field={c.field!r} (mlp or grid)')

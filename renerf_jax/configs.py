@@ -175,6 +175,10 @@ class Config:
   gs_lr_scales: float = gaussians(5e-3)  # Lr of the log scales.
   gs_lr_quats: float = gaussians(1e-3)  # Lr of the rotations.
   gs_lambda_dssim: float = gaussians(0.2)  # Loss (1 - l) L1 + l (1 - SSIM).
+  # DropGaussian (gaussians/dropout.py): each Gaussian is left out of a training step's
+  # render with a probability rising linearly to this at max_steps, the others' opacity
+  # x 1 / (1 - p); 0: off, nothing traced (DropGaussian: 0.2).
+  gs_drop_rate: float = gaussians(0.)
   # Background (white_bkgd: white).
   gs_background: Tuple[float, float, float] = gaussians((0., 0., 0.))
   # --- NeRF: RegNeRF regularisers (0 / False switches a term off: nothing is traced) ---

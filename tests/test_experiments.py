@@ -455,3 +455,39 @@ def test_seed_spread_reports_each_rows_spread_and_the_views_that_spread(tmp_path
   with pytest.raises(SystemExit, match='not LABEL=DIR'):
     seed_spread.main(['--tables', str(tmp_path / 't.json'), '--runs', 'B', '--out',
                       str(tmp_path / 'x')])
+
+
+def test_compare_tables_pairs_rows_of_two_tables_by_scene_and_seed(tmp_path):
+  """experiments/compare_tables.py: row of one table minus a row of another, paired by
+  (scene, seed) over the common ones; a file that is no table is one clear error."""
+  from experiments import compare_tables  # pylint: disable=g-import-not-at-top
+  m = lambda p, s, l: {'psnr': p, 'ssim': s, 'lpips_alex': l}
+  a = {'rows': {'fern': {'B': {'0': m(20., .6, .2), '1': m(21., .7, .1), '2': m(9., .1, .9)}},
+                'room': {'B': {'0': m(18., .5, .3)}}}}
+  b = {'rows': {'fern': {'B': {'0': m(19., .5, .3), '1': m(20.5, .75, .1)}},
+                'room': {'B': {'0': m(18.5, .5, .2)}}, 'trex': {'B': {'0': m(1., 0., 1.)}}}}
+  for name, t in (('a', a), ('b', b)):
+    (tmp_path / f'{name}.json').write_text(json.dumps(t))
+  out = tmp_path / 'res' / 'cmp'
+  compare_tables.main(['--a', str(tmp_path / 'a.json'), '--a_label', 'drop',
+                       '--b', str(tmp_path / 'b.json'), '--b_label', 'plain',
+                       '--out', str(out)])
+  res = json.loads((tmp_path / 'res' / 'cmp.json').read_text())
+  assert [tuple(p) for p in res['pairs']] == [('fern', 0), ('fern', 1), ('room', 0)]
+  np.testing.assert_allclose(res['scenes']['fern']['psnr']['mean'], 0.75)
+  assert res['scenes']['fern']['psnr']['wins'] == 2
+  assert res['scenes']['fern']['lpips_alex']['wins'] == 1  # -0.1 better, 0 not.
+  np.testing.assert_allclose(res['pooled']['psnr']['mean'], (1. + .5 - .5) / 3)
+  assert res['pooled']['psnr']['n'] == 3 and res['pooled']['psnr']['wins'] == 2
+  np.testing.assert_allclose(res['means']['b']['psnr'], (19. + 20.5 + 18.5) / 3)
+  md = (tmp_path / 'res' / 'cmp.md').read_text()
+  assert '| **all** | +0.33 +- 0.76 (2/3)' in md and 'compare_tables --a' in md
+  (tmp_path / 'bad.json').write_text('{"name": 1}')
+  with pytest.raises(SystemExit, match='bad.json: not a renerf_scenes table'):
+    compare_tables.main(['--a', str(tmp_path / 'bad.json'), '--a_label', 'x',
+                         '--b', str(tmp_path / 'b.json'), '--b_label', 'y',
+                         '--out', str(out)])
+  with pytest.raises(SystemExit, match="no \\(scene, seed\\) has both row 'R1'"):
+    compare_tables.main(['--a', str(tmp_path / 'a.json'), '--a_row', 'R1', '--a_label',
+                         'x', '--b', str(tmp_path / 'b.json'), '--b_label', 'y',
+                         '--out', str(out)])

@@ -38,7 +38,8 @@ CAPACITY = 2048  # Config.gs_list_capacity's default.
 @functools.partial(jax.jit, static_argnames=('height', 'width', 'sh_degree', 'cap', 'tile',
                                              'capacity'))
 def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, cap=64,
-           near=0.01, tile=16, means2d_offset=None, capacity=CAPACITY):
+           near=0.01, tile=16, means2d_offset=None, capacity=CAPACITY,
+           opacity_scale=None):
   """Renders an image of the Gaussians.
 
   The gradient of a loss with respect to `means2d_offset` (pass zeros) is the
@@ -62,6 +63,8 @@ def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, c
     tile: static tile size.
     means2d_offset: optional [N, 2] pixel offset added to the projected means (zeros:
       the screen-space gradient probe); None: no offset.
+    opacity_scale: optional [N] factors of the opacities (DropGaussian's, dropout.py:
+      0 drops a Gaussian); None: none.
 
   Returns:
     dict with rgb [H, W, 3], depth [H, W] (weighted sum of view depths, unnormalised:
@@ -78,6 +81,8 @@ def render(gaussians, c2w, focal, height, width, sh_degree=3, background=None, c
                             height, width, near)
   colours = params.eval_sh(sh_degree, g.sh, g.means - c2w[:3, 3])
   opacities = jax.nn.sigmoid(g.opacity_logits)
+  if opacity_scale is not None:
+    opacities = opacities * opacity_scale
   means2d = proj.means2d
   if means2d_offset is not None:
     means2d = means2d + jnp.where(proj.valid[:, None], means2d_offset, 0.)

@@ -32,6 +32,7 @@ import optax
 from renerf_jax import distributed, fit, metrics
 from renerf_jax.errors import DataError
 from renerf_jax.gaussians import density
+from renerf_jax.gaussians import dropout
 from renerf_jax.gaussians import params as params_lib
 from renerf_jax.gaussians import render as render_lib
 from renerf_jax.gaussians.loss import image_loss
@@ -174,21 +175,23 @@ def background(config):
   return jnp.asarray(config.gs_background, jnp.float32)
 
 
-def render_for_loss(config, cam, params, fields, offset, pose, degree):
-  """Render of the Gaussians `fields` (active as params) at pose with SH degree `degree`."""
+def render_for_loss(config, cam, params, fields, offset, pose, degree, opacity_scale=None):
+  """Render of the Gaussians `fields` (active as params) at pose with SH degree `degree`
+  (opacities x opacity_scale where given: DropGaussian's factors)."""
   g = from_fields(fields, params.active)
   g = g.replace(sh=g.sh * sh_mask(degree))
   return render_lib.render(g, pose, cam.focal, cam.h, cam.w, 3, background(config),
                            config.gs_tile_cap, NEAR, TILE, means2d_offset=offset,
-                           capacity=config.gs_list_capacity)
+                           capacity=config.gs_list_capacity, opacity_scale=opacity_scale)
 
 
-def loss_and_grads(config, cam, params, image, pose, mask, degree):
+def loss_and_grads(config, cam, params, image, pose, mask, degree, opacity_scale=None):
   """Loss, its gradients and the screen-space gradients of one image.
 
   Args:
     config, cam: static. params: Gaussians. image: [H, W, 3]. pose: [3, 4].
     mask: [H, W] pixel weights. degree: SH degree (traced int).
+    opacity_scale: optional [N] opacity factors (dropout.opacity_scale); None: none.
 
   Returns:
     (loss, mse, render dict, grads {field: array} (to_fields layout), grad2d [N, 2]).
@@ -197,7 +200,8 @@ def loss_and_grads(config, cam, params, image, pose, mask, degree):
   offset = jnp.zeros((params.means.shape[0], 2), params.means.dtype)
 
   def fn(fields, offset):
-    out = render_for_loss(config, cam, params, fields, offset, pose, degree)
+    out = render_for_loss(config, cam, params, fields, offset, pose, degree,
+                          opacity_scale)
     loss, mse = image_loss(out['rgb'], image, mask, config.gs_lambda_dssim)
     return loss, (mse, out)
 
@@ -224,17 +228,24 @@ def train_step(config, cam: Camera, pseudo_on: bool, state: GaussianTrainState, 
   Returns:
     (new state, stats). A non-finite loss or gradient leaves params and optimizer state
     unchanged and increments state.nan_skips; an image with no pixel weight (an all-zero
-    mask) leaves them unchanged too (nothing to learn from it).
+    mask) leaves them unchanged too (nothing to learn from it). With Config.gs_drop_rate
+    > 0 the render drops Gaussians (dropout.py) with a key split from `key`; at 0 the
+    key is used as is and nothing of the dropout is traced.
   """
   del pseudo_on  # The variants differ in data's shapes.
+  iteration = state.step + 1
+  params = state.params
+  scale = None
+  if config.gs_drop_rate > 0.:
+    key, key_drop = jax.random.split(key)
+    scale = dropout.opacity_scale(key_drop, params.means.shape[0],
+                                  dropout.drop_rate_at(iteration, config))
   n_views = data['images'].shape[0]
   idx = jax.random.randint(key, (), 0, n_views)
   image, pose, mask = data['images'][idx], data['poses'][idx], data['masks'][idx]
-  iteration = state.step + 1
   degree = sh_degree_at(iteration, config)
-  params = state.params
   loss, mse, out, grads, grad2d = loss_and_grads(config, cam, params, image, pose, mask,
-                                                 degree)
+                                                 degree, scale)
   finite = (jnp.isfinite(loss) & jnp.all(jnp.isfinite(grad2d)) & jnp.all(jnp.array(
       [jnp.all(jnp.isfinite(g)) for g in jax.tree_util.tree_leaves(grads)])))
   informative = jnp.sum(mask) > 0.
