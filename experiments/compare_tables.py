@@ -32,38 +32,29 @@ def read_rows(path):
 
 
 def compare(rows_a, row_a, rows_b, row_b):
-  """Paired deltas of rows_a[scene][row_a] - rows_b[scene][row_b] over common seeds.
+  """Paired deltas of rows_a[scene][row_a] - rows_b[scene][row_b] over common seeds
+  (renerf_scenes.pair_stats, per scene and pooled).
 
   Returns:
     {'pairs': [(scene, seed)], 'scenes': {scene: {metric: paired_summary}},
     'pooled': {metric: paired_summary}, 'means': {'a'|'b': {metric: mean}}}.
     ValueError when no (scene, seed) is in both.
   """
-  pairs, per_scene, pooled = [], {}, {m: [] for m in renerf_scenes.METRICS}
-  means = {'a': {m: [] for m in renerf_scenes.METRICS},
-           'b': {m: [] for m in renerf_scenes.METRICS}}
+  keys, by_scene = [], {}
   for scene in sorted(set(rows_a) & set(rows_b)):
     a, b = rows_a[scene].get(row_a, {}), rows_b[scene].get(row_b, {})
-    seeds = sorted(set(a) & set(b), key=int)
-    deltas = {m: [] for m in renerf_scenes.METRICS}
-    for s in seeds:
-      pairs.append((scene, int(s)))
-      for m in renerf_scenes.METRICS:
-        deltas[m].append(a[s][m] - b[s][m])
-        means['a'][m].append(a[s][m])
-        means['b'][m].append(b[s][m])
-    if seeds:
-      per_scene[scene] = {m: paired.paired_summary(d, renerf_scenes.BETTER[m])
-                          for m, d in deltas.items()}
-      for m in renerf_scenes.METRICS:
-        pooled[m] += deltas[m]
-  if not pairs:
+    for s in sorted(set(a) & set(b), key=int):
+      keys.append((scene, int(s)))
+      by_scene.setdefault(scene, []).append((a[s], b[s]))
+  if not keys:
     raise ValueError(f'no (scene, seed) has both row {row_a!r} and row {row_b!r}')
-  return {'pairs': pairs, 'scenes': per_scene,
-          'pooled': {m: paired.paired_summary(d, renerf_scenes.BETTER[m])
-                     for m, d in pooled.items()},
-          'means': {k: {m: sum(v) / len(v) for m, v in d.items()}
-                    for k, d in means.items()}}
+  pooled = [p for pairs in by_scene.values() for p in pairs]
+  return {'pairs': keys,
+          'scenes': {sc: renerf_scenes.pair_stats(pairs) for sc, pairs in by_scene.items()},
+          'pooled': renerf_scenes.pair_stats(pooled),
+          'means': {side: {m: sum(p[i][m] for p in pooled) / len(pooled)
+                           for m in renerf_scenes.METRICS}
+                    for i, side in enumerate(('a', 'b'))}}
 
 
 def markdown(result, label_a, label_b, command):
