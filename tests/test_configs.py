@@ -374,6 +374,16 @@ def test_every_shipped_config_loads_and_binds_only_what_its_backbone_reads():
     c = _gin(name)
     assert (c.data_dir, c.dataset_loader, c.factor, c.n_input_views, c.llffhold) == (
         data.data_dir, 'llff', 8, 3, 8), name
+  # The lego configs of both backbones share lego8_data.gin's data and split the same way.
+  fields = ('dataset_loader', 'data_dir', 'scene', 'n_input_views', 'test_stride',
+            'white_bkgd', 'use_ndc', 'near', 'far', 'blender_split')
+  data = _gin('lego8_data.gin')
+  for name in ('lego8.gin', 'gaussians_lego8.gin'):
+    with open(os.path.join(GIN, name)) as f:
+      assert 'lego8_data.gin' in re.findall(r"^include '(.+)'", f.read(), re.M), name
+    c = _gin(name)
+    assert [getattr(c, k) for k in fields] == [getattr(data, k) for k in fields], name
+  assert (data.scene, data.n_input_views, data.blender_split) == ('lego', 8, 'standard')
 
 
 def test_the_near_far_annealing_bounds_k_of_the_nerf_only():
