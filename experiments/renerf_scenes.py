@@ -104,6 +104,10 @@ def parser():
                  help="extra R1 row 'LABEL=binding;binding' trained from the same B")
   p.add_argument('--no_2x', action='store_true',
                  help="skip B trained 2x longer (and the control at 2x steps at D's seed)")
+  p.add_argument('--no_b2x', action='store_true',
+                 help="skip B trained 2x longer at B's seed but keep the control at 2x "
+                      "steps at D's seed (the more-compute control that differs from R1 in "
+                      "the pseudo-views alone; B 2x at B's seed shares B's seed luck)")
   p.add_argument('--no_controls', action='store_true',
                  help="skip the seed-matched controls (B's training at D's seed, at B's "
                       "steps and, unless --no_2x, at 2x B's steps; with Config.d_seed="
@@ -225,7 +229,8 @@ def scene_runs(args, scene_name, base_bindings):
       ms = run(cfg, scene, os.path.join(root, label, f'seed{seed}'),
                [os.path.join(root, 'Re-Nerfing', f'seed{seed}')])
       rows.setdefault(label, {})[seed] = ms[1]
-  if not args.no_2x and (args.scenes_2x is None or scene_name in args.scenes_2x):
+  two_x = not args.no_2x and (args.scenes_2x is None or scene_name in args.scenes_2x)
+  if two_x and not args.no_b2x:
     for seed in args.seeds:
       cfg = dataclasses.replace(config, seed=seed, num_rounds=0,
                                 max_steps=2 * config.max_steps)
@@ -234,7 +239,7 @@ def scene_runs(args, scene_name, base_bindings):
           reuse(2 * config.max_steps, seed))[0]
   if not args.no_controls:
     controls = [(CONTROL, config.max_steps, 'Re-Nerfing')]
-    if not args.no_2x and (args.scenes_2x is None or scene_name in args.scenes_2x):
+    if two_x:
       controls.append((CONTROL_2X, 2 * config.max_steps, TWO_X))
     for label, steps, twin in controls:
       for seed in args.seeds:

@@ -276,6 +276,14 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
   assert set(n_rows) == {'B', 'R1 + masks', renerf_scenes.CONTROL}
   assert n_rows['B'] == {'0': rows['B']['0']}
   assert tree_files(out / 's') == before
+  # --no_b2x: the more-compute control at D's seed without B 2x at B's seed.
+  sub = subprocess.run(cmd + ['--table', 'b', '--seeds', '0', '--no_b2x'], cwd=REPO,
+                       capture_output=True, text=True, timeout=600, check=False)
+  assert sub.returncode == 0, sub.stderr[-3000:]
+  b_rows = json.loads((out / 'b.json').read_text())['rows']['procedural']
+  assert 'B 2x steps' not in b_rows
+  assert b_rows[renerf_scenes.CONTROL_2X] == {'0': rows[renerf_scenes.CONTROL_2X]['0']}
+  assert tree_files(out / 's') == before
   bad = subprocess.run(cmd + ['--no_r1'], cwd=REPO, capture_output=True, text=True,
                        timeout=600, check=False)
   assert bad.returncode == 2 and 'error: --no_r1 leaves no rounds' in bad.stderr
