@@ -372,8 +372,9 @@ def markdown(summary, scenes, command, sources=(), backbone='nerf'):
     b, r1 = PAPER_3DGS_360
     lines.append(f'| paper R1 - 3DGS (mip-NeRF 360, 30 views: no LLFF 3DGS rows) | | '
                  f'{r1[0] - b[0]:+.2f} |{pad} {r1[1] - b[1]:+.3f} | {r1[2] - b[2]:+.3f} |')
-    lines += ['', 'Backbone: 3D Gaussian Splatting. The "paper R1 - RegNeRF" rows are the '
-              "paper's LLFF deltas on its NeRF backbone, for scale only."]
+    lines += ['', 'Backbone: 3D Gaussian Splatting.' + (
+        ' The "paper R1 - RegNeRF" rows are the paper\'s LLFF deltas on its NeRF backbone, '
+        'for scale only.' if summary['paper_R1_delta_mean'] else '')]
   lines += ['', 'Each delta: the row minus the reference row of the same (scene, seed), '
             'mean +- std over pairs (wins/n: pairs where the row is better: higher PSNR / '
             'SSIM, lower LPIPS), the two-sided paired t-test p-value and the paired '

@@ -399,6 +399,10 @@ def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_ba
   assert_table_cells(renerf_scenes.markdown(s2, ['fern'], 'cmd'))
   assert '| paper R1 - 3DGS (mip-NeRF 360, 30 views: no LLFF 3DGS rows) | | +0.81 |' in gs
   assert 'paper R1 - 3DGS' not in renerf_scenes.markdown(summary, ['fern'], 'cmd')
+  assert 'are the paper\'s LLFF deltas on its NeRF backbone' in gs  # fern has a paper row
+  lego = renerf_scenes.markdown(renerf_scenes.summarize({'lego': rows['fern']}, ['lego'], [0, 1]),
+                                ['lego'], 'cmd', backbone='gaussians')
+  assert 'Backbone: 3D Gaussian Splatting.' in lego and 'RegNeRF' not in lego
   paths = []
   # Commands as recorded before the scripts ran as modules, and since.
   for seed, script in ((0, 'experiments/renerf_scenes.py'), (1, '-m experiments.renerf_scenes')):
