@@ -75,6 +75,9 @@ def check_config(c):
   _check(c.gs_init_points >= 1 and c.gs_capacity >= c.gs_init_points,
          f'Config.gs_capacity={c.gs_capacity} must be >= Config.gs_init_points='
          f'{c.gs_init_points} >= 1')
+  _check(0 <= c.gs_init_views <= max(c.n_input_views, 1),
+         f'Config.gs_init_views={c.gs_init_views} must lie in [0, Config.n_input_views='
+         f'{c.n_input_views}]')
   _check(0. < c.gs_init_opacity < 1.,
          f'Config.gs_init_opacity={c.gs_init_opacity} must lie in (0, 1)')
   _check(c.gs_tile_cap >= 0,

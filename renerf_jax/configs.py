@@ -51,6 +51,11 @@ class Config:
   # axis is the origin, then scaled so the farthest camera is at distance 1 (the scene
   # box with them), as mip-NeRF 360 places unbounded scenes for its contraction.
   normalize_poses: bool = shared(False)
+  # transforms.json captures with OpenCV distortion or an off-centre principal point:
+  # the photos resampled to a centred pinhole camera of their size, the uncovered border
+  # cropped (datasets/undistort.py; COLMAP's undistorter). The Gaussians need it: they
+  # render centred pinhole cameras only.
+  undistort: bool = shared(False)
   llffhold: int = shared(8)  # Every llffhold-th image is a test view.
   # Blender layout (transforms_test.json): every test_stride-th test frame is a test view
   # (the few-shot Blender protocol of DietNeRF / FreeNeRF: 8, i.e. 25 of lego's 200).
@@ -142,6 +147,12 @@ class Config:
   # Their scale: 3DGS's 3-nearest-neighbour distance (else the box spacing, box side /
   # gs_init_points^(1/3)).
   gs_init_knn: bool = gaussians(True)
+  # 0: the random start is uniform in Scene.world_bounds (3DGS on Blender); k >= 1:
+  # uniform among the box's points that k or more training cameras see (in the image,
+  # beyond Config.near): for captures whose box holds the cameras (real scenes with a
+  # background, fox), keeping Gaussians out of the space that no training view
+  # constrains and, from k = 2, off the cameras' own lenses.
+  gs_init_views: int = gaussians(0)
   # At most this many Gaussians (the nearest) per 16x16 tile; 0: all (up to the capacity).
   gs_tile_cap: int = gaussians(0)
   # With gs_tile_cap 0, the rasteriser's pair buffer: K x this (8x8 pixel block,

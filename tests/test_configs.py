@@ -143,6 +143,8 @@ def test_bad_value_names_the_field():
   for field in ('hessian_chunk', 'render_chunk'):
     with pytest.raises(ConfigError, match=f'Config.{field}=0 must be >= 1'):
       load_config([], [f'Config.{field} = 0'])
+  with pytest.raises(ConfigError, match=r'Config.gs_init_views=4 must lie in \[0, '):
+    load_config([], ["Config.backbone = 'gaussians'", 'Config.gs_init_views = 4'])
 
 
 def test_bindings_do_not_leak_and_config_gin_round_trips(tmp_path):
@@ -377,13 +379,20 @@ def test_every_shipped_config_loads_and_binds_only_what_its_backbone_reads():
   # The lego configs of both backbones share lego8_data.gin's data and split the same way.
   fields = ('dataset_loader', 'data_dir', 'scene', 'n_input_views', 'test_stride',
             'white_bkgd', 'use_ndc', 'near', 'far', 'blender_split')
-  data = _gin('lego8_data.gin')
-  for name in ('lego8.gin', 'gaussians_lego8.gin'):
-    with open(os.path.join(GIN, name)) as f:
-      assert 'lego8_data.gin' in re.findall(r"^include '(.+)'", f.read(), re.M), name
-    c = _gin(name)
-    assert [getattr(c, k) for k in fields] == [getattr(data, k) for k in fields], name
-  assert (data.scene, data.n_input_views, data.blender_split) == ('lego', 8, 'standard')
+  # So do the fox configs with fox12_data.gin (the Gaussians' also undistort the photos).
+  fields += ('image_downsample', 'normalize_poses', 'llffhold')
+  for data_gin, names in (('lego8_data.gin', ('lego8.gin', 'gaussians_lego8.gin')),
+                          ('fox12_data.gin', ('fox12.gin', 'gaussians_fox12.gin'))):
+    data = _gin(data_gin)
+    for name in names:
+      with open(os.path.join(GIN, name)) as f:
+        assert data_gin in re.findall(r"^include '(.+)'", f.read(), re.M), name
+      c = _gin(name)
+      assert [getattr(c, k) for k in fields] == [getattr(data, k) for k in fields], name
+  lego = _gin('lego8_data.gin')
+  assert (lego.scene, lego.n_input_views, lego.blender_split) == ('lego', 8, 'standard')
+  assert (data.scene, data.n_input_views, data.normalize_poses) == ('fox', 12, True)
+  assert _gin('gaussians_fox12.gin').undistort and not _gin('fox12.gin').undistort
 
 
 def test_the_near_far_annealing_bounds_k_of_the_nerf_only():

@@ -12,6 +12,7 @@ from conftest import tiny_config
 from gaussian_helpers import random_gaussians
 from renerf_jax import metrics, rundir
 from renerf_jax.datasets import load_scene
+from renerf_jax.errors import DataError
 from renerf_jax.gaussians import params as params_lib
 from renerf_jax.gaussians import ply
 from renerf_jax.gaussians import render as render_lib
@@ -307,6 +308,47 @@ def test_world_bounds_hold_the_scene_and_the_random_init(scene):
   m = np.asarray(g.means)[np.asarray(g.active)]
   assert len(m) == CFG.gs_init_points and g.means.shape == (CFG.gs_capacity, 3)
   assert np.all((m >= lo - 1e-5) & (m <= hi + 1e-5))
+
+
+def test_views_seeing_counts_the_cameras_whose_image_holds_a_point():
+  """Cameras at the origin and at x = 1 looking down -z, a third at the origin looking
+  along +x (24x32 pixels, focal 30): in front beyond near and inside the image counts."""
+  look_x = np.array([[0., 0., -1., 0.], [0., 1., 0., 0.], [1., 0., 0., 0.]])
+  shifted = np.eye(4)[:3].copy()
+  shifted[0, 3] = 1.
+  poses = np.stack([np.eye(4)[:3], shifted])
+  points = np.array([[0., 0., -2.], [0., 0., 1.], [0., 0., -0.05], [-1.5, 0., -2.],
+                     [1., 0., -2.], [1.5, 0., -2.], [0., 1., -2.]])
+  np.testing.assert_array_equal(gtrain.views_seeing(points, poses, 30., 24, 32, 0.1),
+                                [2, 0, 0, 0, 2, 1, 0])
+  np.testing.assert_array_equal(
+      gtrain.views_seeing(np.array([[2., 0., 0.], [0., 0., -2.]]), look_x[None], 30.,
+                          24, 32, 0.1), [1, 0])
+
+
+def test_the_random_start_among_points_that_k_training_views_see(scene):
+  """Config.gs_init_views = 2: every initial Gaussian is seen by 2 or more training views
+  (the box-uniform start has points that fewer see), the same for the same key; a box
+  that no camera sees is refused in one line."""
+  train = scene.poses[scene.train_idx]
+  count = lambda m: gtrain.views_seeing(m, train, scene.focal, scene.height, scene.width,
+                                        scene.near)
+  box = gtrain.init_gaussians(CFG, scene, jax.random.PRNGKey(0))
+  assert np.mean(count(np.asarray(box.means)[np.asarray(box.active)]) < 2) > 0.05
+  cfg = dataclasses.replace(CFG, gs_init_views=2)
+  g = gtrain.init_gaussians(cfg, scene, jax.random.PRNGKey(0))
+  m = np.asarray(g.means)[np.asarray(g.active)]
+  assert len(m) == CFG.gs_init_points and g.means.shape == (CFG.gs_capacity, 3)
+  assert np.all(count(m) >= 2)
+  lo, hi = (np.asarray(b) for b in scene.world_bounds)
+  assert np.all((m >= lo - 1e-5) & (m <= hi + 1e-5))
+  assert np.all(np.asarray(g.log_scales)[:len(m)] < np.log(np.max(hi - lo)))
+  again = gtrain.init_gaussians(cfg, scene, jax.random.PRNGKey(0))
+  np.testing.assert_array_equal(np.asarray(again.means), np.asarray(g.means))
+  behind = train[:, :3, 3].mean(0) + 100. * train[:, :3, 2].mean(0)  # Behind them all.
+  with pytest.raises(DataError, match='gs_init_views=2: only 0 of 2048 random points'):
+    gtrain.seen_points(jax.random.PRNGKey(0), 512, behind - 1., behind + 1., scene, 2,
+                       rounds=1)
 
 
 # ----------------------------------------------------------------------------- ply

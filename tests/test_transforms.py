@@ -251,3 +251,82 @@ def test_blender_standard_split_is_the_literatures_eight_ids():
     load_scene(Config(dataset_loader='blender', **dict(kw, n_input_views=9)))
   with pytest.raises(ConfigError, match="Config.blender_split='even'"):
     Config(blender_split='even')
+
+
+# ------------------------------------------------------------------ undistorted photos
+
+_INTR = (41., 40.2, 33.1, 22.4, 0.06, -0.08, -0.001, 0.0015)  # A 48x64 photo's camera.
+
+
+def _pattern(x, y):
+  """A smooth colour pattern on the undistorted normalised image plane."""
+  return np.stack([0.5 + 0.4 * np.sin(3. * x), 0.5 + 0.4 * np.cos(2. * y + x),
+                   0.5 + 0.3 * np.sin(2. * x * y)], -1)
+
+
+def _photo(h, w, intrinsics):
+  """The pattern as a camera of `intrinsics` photographs it (each pixel centre's ray)."""
+  v, u = np.mgrid[:h, :w] + 0.5
+  fx, fy, cx, cy = intrinsics[:4]
+  x, y = cameras.undistort((u - cx) / fx, (v - cy) / fy, intrinsics[4:], iterations=20)
+  return _pattern(np.asarray(x), np.asarray(y))[None].astype(np.float32)
+
+
+def test_undistorted_photos_are_the_pinhole_views_of_the_same_rays():
+  """A distorted, off-centre photo of a smooth pattern, resampled, matches the pattern
+  seen by the centred pinhole camera of the returned focal (bilinear error only); that
+  focal is the smallest whose pixels all land in the photo."""
+  from renerf_jax.datasets import undistort  # pylint: disable=g-import-not-at-top
+  h, w = 48, 64
+  out, focal = undistort.undistort_images(_photo(h, w, _INTR), _INTR)
+  assert out.shape == (1, h, w, 3) and out.dtype == np.float32
+  v, u = np.mgrid[:h, :w] + 0.5
+  want = _pattern((u - 0.5 * w) / focal, (v - 0.5 * h) / focal)
+  np.testing.assert_allclose(out[0], want, atol=2e-3)
+  # The border: 2 pixels of principal-point offset and the distortion cost a zoom.
+  assert _INTR[0] < focal < 1.2 * _INTR[0]
+  sx, sy = undistort._sources(focal, h, w, _INTR)  # pylint: disable=protected-access
+  assert sx.min() >= 0. and sx.max() <= w - 1 and sy.min() >= 0. and sy.max() <= h - 1
+  sx, sy = undistort._sources(0.999 * focal, h, w, _INTR)  # pylint: disable=protected-access
+  assert sx.min() < 0. or sx.max() > w - 1 or sy.min() < 0. or sy.max() > h - 1
+
+
+def test_undistorting_a_centred_pinhole_photo_keeps_it():
+  from renerf_jax.datasets import undistort  # pylint: disable=g-import-not-at-top
+  photo = np.random.default_rng(0).random((2, 10, 14, 3)).astype(np.float32)
+  out, focal = undistort.undistort_images(photo, (20., 20., 7., 5., 0., 0., 0., 0.))
+  assert focal == pytest.approx(20., rel=2e-4)
+  np.testing.assert_allclose(out, photo, atol=2e-3)
+
+
+def test_undistortion_refuses_a_principal_point_outside_the_photo():
+  from renerf_jax.datasets import undistort  # pylint: disable=g-import-not-at-top
+  with pytest.raises(ValueError, match='no centred pinhole camera'):
+    undistort.pinhole_focal(10, 14, (20., 20., -30., 5., 0., 0., 0., 0.))
+
+
+def test_fox_undistorted_renders_as_a_centred_pinhole_camera():
+  """Config.undistort: fox's photos resampled to a centred pinhole camera of their size
+  (the Gaussians' camera); a pixel's pinhole ray is the distorted camera's ray (the
+  NeRF's cameras.pixel_directions) through the photo position it was sampled at."""
+  from renerf_jax.gaussians.training import Camera  # pylint: disable=g-import-not-at-top
+  raw = load_scene(_fox())
+  scene = load_scene(_fox(undistort=True))
+  assert scene.intrinsics is None and scene.images.shape == raw.images.shape
+  fx, fy, cx, cy = raw.intrinsics[:4]
+  assert fx < scene.focal < 1.1 * fx
+  assert Camera.of(scene).focal == scene.focal
+  h, w = scene.height, scene.width
+  for r, c in ((0, 0), (h - 1, w - 1), (h // 2, w // 2), (17, 200 % w), (401, 3)):
+    d = np.asarray(cameras.pixel_directions(c, r, scene.focal, h, w))
+    xd, yd = cameras.distort(d[0] / -d[2], -d[1] / -d[2], raw.intrinsics[4:])
+    sx, sy = fx * xd + cx - 0.5, fy * yd + cy - 0.5  # Pixel indices (centres at i + 0.5).
+    np.testing.assert_allclose(
+        np.asarray(cameras.pixel_directions(sx, sy, raw.focal, h, w, raw.intrinsics)),
+        d, atol=1e-5)
+    x0, y0 = int(np.floor(sx)), int(np.floor(sy))
+    ax, ay = sx - x0, sy - y0
+    img = raw.images[:, y0:y0 + 2, x0:x0 + 2]
+    want = ((1 - ay) * ((1 - ax) * img[:, 0, 0] + ax * img[:, 0, -1])
+            + ay * ((1 - ax) * img[:, -1, 0] + ax * img[:, -1, -1]))
+    np.testing.assert_allclose(scene.images[:, r, c], want, atol=1e-5)

@@ -22,7 +22,8 @@ Blender loader does). Config.normalize_poses moves and scales the cameras as mip
 360 places unbounded scenes (the focus point of the optical axes at the origin, the
 farthest camera at distance 1); nerfstudio's own files carry no aabb_scale and are not
 normalised otherwise, so the default box (half-size 1.5) may not hold such a scene
-without it. Every problem is one DataError line naming the file.
+without it. Config.undistort resamples distorted photos to a centred pinhole camera
+(undistort.py). Every problem is one DataError line naming the file.
 """
 import json
 import os
@@ -30,6 +31,7 @@ import os
 import numpy as np
 
 from renerf_jax.datasets import images as image_io
+from renerf_jax.datasets import undistort
 from renerf_jax.datasets.blender import blender_split
 from renerf_jax.datasets.scene import Scene, fewshot_split
 from renerf_jax.errors import DataError
@@ -204,6 +206,9 @@ def load_transforms(config) -> Scene:
   fx, fy, cx, cy = intr[:4]
   pinhole = (abs(fx - fy) <= 1e-9 * fx and abs(cx - 0.5 * w) <= 1e-9 * w
              and abs(cy - 0.5 * h) <= 1e-9 * h and not any(intr[4:]))
+  if config.undistort and not pinhole:  # Resampled to a centred pinhole camera.
+    images, fx = undistort.undistort_images(images, intr)
+    pinhole = True
   meta = _read_json(meta_path)
   half = 1.5 * (_number(meta, 'aabb_scale', meta_path, 'top-level')
                 if 'aabb_scale' in meta else 1.)

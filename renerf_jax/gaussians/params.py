@@ -66,23 +66,15 @@ def random_init(key, n, lo, hi, capacity=None, init_opacity=0.1, scale_factor=1.
                 knn=False):
   """Gaussians uniform in the box [lo, hi], isotropic, grey, of low opacity.
 
-  Each scale is `scale_factor` * mean box side / n^(1/3) (the spacing of n points in the
-  box), or with `knn` 3DGS's: the root mean squared distance to the 3 nearest points;
-  rotations are the identity, the opacity is `init_opacity` (logit(0.1) as in
-  3DGS), and all SH coefficients are zero, i.e. colour 0.5 grey from every side.
-
   Args:
     key: jax PRNG key.
     n: number of active Gaussians.
     lo, hi: [3] box corners.
-    capacity: total slots (>= n, default n); slots n.. are inactive copies.
-    init_opacity: initial opacity in (0, 1).
-    scale_factor: multiplies the initial scale.
-    knn: 3DGS's nearest-neighbour scales instead of the box spacing (n >= 2; a single
-      Gaussian keeps the box spacing).
+    capacity: total slots (>= n, default n); slots n.. are inactive.
+    init_opacity, scale_factor, knn: as init_at (the spacing: mean box side / n^(1/3)).
 
   Returns:
-    Gaussians with N = capacity.
+    Gaussians with N = capacity (init_at).
   """
   capacity = n if capacity is None else capacity
   if capacity < n:
@@ -90,12 +82,39 @@ def random_init(key, n, lo, hi, capacity=None, init_opacity=0.1, scale_factor=1.
   lo = jnp.asarray(lo, jnp.float32)
   hi = jnp.asarray(hi, jnp.float32)
   means = lo + (hi - lo) * jax.random.uniform(key, (capacity, 3))
+  return init_at(means, n, jnp.mean(hi - lo) / float(n)**(1. / 3.), init_opacity,
+                 scale_factor, knn)
+
+
+def init_at(means, n, spacing, init_opacity=0.1, scale_factor=1., knn=False):
+  """Isotropic grey Gaussians of low opacity at given centres, the first n active.
+
+  Each scale is `scale_factor` * `spacing`, or with `knn` 3DGS's: the root mean squared
+  distance to the 3 nearest of the n points; rotations are the identity, the opacity is
+  `init_opacity` (logit(0.1) as in 3DGS), and all SH coefficients are zero, i.e. colour
+  0.5 grey from every side.
+
+  Args:
+    means: [capacity, 3] centres (those of slots n.. are kept but inactive).
+    n: number of active Gaussians (<= capacity).
+    spacing: the scale without knn (e.g. the spacing of n points in their volume).
+    init_opacity: initial opacity in (0, 1).
+    scale_factor: multiplies the initial scale.
+    knn: 3DGS's nearest-neighbour scales instead of the spacing (n >= 2; a single
+      Gaussian keeps the spacing).
+
+  Returns:
+    Gaussians with N = capacity.
+  """
+  means = jnp.asarray(means, jnp.float32)
+  capacity = means.shape[0]
+  if capacity < n:
+    raise ValueError(f'capacity {capacity} < n {n}')
   if knn and n >= 2:
     scale = jnp.zeros((capacity,)).at[:n].set(knn_scales(means[:n]))
     log_scales = jnp.log(jnp.maximum(scale_factor * scale, 1e-7))[:, None] * jnp.ones(3)
   else:
-    scale = scale_factor * jnp.mean(hi - lo) / float(n)**(1. / 3.)
-    log_scales = jnp.full((capacity, 3), jnp.log(scale))
+    log_scales = jnp.full((capacity, 3), jnp.log(scale_factor * spacing))
   quats = jnp.tile(jnp.array([1., 0., 0., 0.]), (capacity, 1))
   logit = float(np.log(init_opacity / (1. - init_opacity)))
   return Gaussians(
