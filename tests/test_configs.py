@@ -441,6 +441,7 @@ def test_docs_list_every_field_under_its_concern_and_backbone():
   assert len(sections) == len(want)
   for (group, by_tag), section in zip(want.items(), sections):
     assert section.startswith(GROUPS[group]), (group, section[:60])
+    assert section.startswith(f'{GROUPS[group]}: {sum(map(len, by_tag.values()))} fields')
     got = {}
     for label, names in re.findall(r'^- ([^:(]+?)(?: \(.*?\))?: (.+)$', section, re.M):
       got.setdefault(labels[label], []).extend(re.findall(r'`(\w+)`', names))

@@ -299,10 +299,20 @@ def test_undistorting_a_centred_pinhole_photo_keeps_it():
   np.testing.assert_allclose(out, photo, atol=2e-3)
 
 
-def test_undistortion_refuses_a_principal_point_outside_the_photo():
+def test_undistortion_refuses_cameras_it_cannot_resample(tmp_path, monkeypatch):
+  """A principal point outside the photo: one DataError line naming the file; a camera
+  that even a quarter of its focal fits (a folding distortion) is refused, not bisected."""
   from renerf_jax.datasets import undistort  # pylint: disable=g-import-not-at-top
   with pytest.raises(ValueError, match='no centred pinhole camera'):
     undistort.pinhole_focal(10, 14, (20., 20., -30., 5., 0., 0., 0., 0.))
+  frames = [_frame(i, fl_x=5., cx=-30., cy=3., k1=0.1) for i in range(3)]
+  cfg = dataclasses.replace(_write_scene(tmp_path, frames, w=8, h=6), undistort=True)
+  with pytest.raises(DataError, match='transforms.json: Config.undistort: no centred') as e:
+    load_scene(cfg)
+  assert '\n' not in str(e.value)
+  monkeypatch.setattr(undistort, '_inside', lambda *a: True)
+  with pytest.raises(ValueError, match='folds the image'):
+    undistort.pinhole_focal(10, 14, (20., 20., 7., 5., 0., 0., 0., 0.))
 
 
 def test_fox_undistorted_renders_as_a_centred_pinhole_camera():

@@ -207,7 +207,10 @@ def load_transforms(config) -> Scene:
   pinhole = (abs(fx - fy) <= 1e-9 * fx and abs(cx - 0.5 * w) <= 1e-9 * w
              and abs(cy - 0.5 * h) <= 1e-9 * h and not any(intr[4:]))
   if config.undistort and not pinhole:  # Resampled to a centred pinhole camera.
-    images, fx = undistort.undistort_images(images, intr)
+    try:
+      images, fx = undistort.undistort_images(images, intr)
+    except ValueError as e:
+      raise DataError(f'{meta_path}: Config.undistort: {e}') from None
     pinhole = True
   meta = _read_json(meta_path)
   half = 1.5 * (_number(meta, 'aabb_scale', meta_path, 'top-level')

@@ -39,7 +39,8 @@ def pinhole_focal(h, w, intrinsics):
 
   Returns:
     The focal length; ValueError where no focal up to 100 x max(fx, fy) fits (the
-    principal point outside the photo, or a distortion that folds the image).
+    principal point outside the photo) or one of a quarter of min(fx, fy) does (a
+    distortion that folds the image).
   """
   hi = float(max(intrinsics[0], intrinsics[1]))
   while not _inside(hi, h, w, intrinsics):
@@ -48,6 +49,10 @@ def pinhole_focal(h, w, intrinsics):
       raise ValueError(f'no centred pinhole camera of a {h}x{w} image fits inside the '
                        f'photo of intrinsics {tuple(float(v) for v in intrinsics)}')
   lo = 0.25 * float(min(intrinsics[0], intrinsics[1]))
+  if _inside(lo, h, w, intrinsics):  # The bisection needs lo outside, hi inside.
+    raise ValueError(f'the photo of intrinsics {tuple(float(v) for v in intrinsics)} '
+                     f'holds a centred pinhole camera of focal {lo:g}: a distortion that '
+                     'folds the image')
   while hi - lo > 1e-4 * hi:
     mid = 0.5 * (lo + hi)
     lo, hi = (lo, mid) if _inside(mid, h, w, intrinsics) else (mid, hi)

@@ -158,8 +158,8 @@ def seen_points(key, n, lo, hi, scene, min_views, rounds=64):
     if total >= n:
       return np.concatenate(kept)[:n].astype(np.float32)
   raise DataError(f'scene {scene.name!r}: Config.gs_init_views={min_views}: only {total} '
-                  f'of {rounds * 4 * n} random points in its box are seen by '
-                  f'{min_views} training views; lower Config.gs_init_views')
+                  f'of {rounds * 4 * n} random points in its box (needed: {n}) are seen '
+                  f'by {min_views} or more training views; lower Config.gs_init_views')
 
 
 def init_gaussians(config, scene, key):
