@@ -1,4 +1,6 @@
-"""Test renders of a renerf_scenes table side by side: the photo | B | R1 | B 2x longer.
+"""Test renders of a renerf_scenes table side by side: the photo | B | R1 | B 2x longer
+(at B's seed, or with --b2x d_seed B's training 2x longer at D's seed: the --no_b2x
+tables' control).
 
 Reads the test-view PNGs and per-image metrics that every finished round already wrote
 (<run>/round_<r>/eval/test_XXX.png, metrics.json) from the run tree of
@@ -17,13 +19,16 @@ import os
 import imageio.v3 as iio
 import numpy as np
 
+from experiments.renerf_scenes import CONTROL_2X, TWO_X
 from renerf_jax import figures, report, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.evaluation import view_name
 
-# (column title, row folder of renerf_scenes.py, round)
-COLUMNS = (('B', 'Re-Nerfing', 0), ('R1', 'Re-Nerfing', 1), ('B 2x longer', 'B 2x steps', 0))
+# (column title, row folder of renerf_scenes.py, round); the last by --b2x.
+COLUMNS = (('B', 'Re-Nerfing', 0), ('R1', 'Re-Nerfing', 1))
+B2X_COLUMNS = {'b_seed': ('B 2x longer', TWO_X, 0),
+               'd_seed': ("B 2x longer, D's seed", CONTROL_2X, 0)}
 
 
 def round_render(run_dir, r, view):
@@ -49,10 +54,13 @@ def main(argv=None):
   p.add_argument('--seed', type=int, default=0)
   p.add_argument('--test_view', type=int, default=0,
                  help='which test view (0: the first of the split)')
+  p.add_argument('--b2x', choices=sorted(B2X_COLUMNS), default='b_seed',
+                 help="the last column: B 2x longer at B's seed, or at D's seed")
   p.add_argument('--out', required=True, help='output .png')
   args = p.parse_args(argv)
-  fig, axes = figures.subplots(len(args.scenes), 1 + len(COLUMNS),
-                              figsize=(3.2 * (1 + len(COLUMNS)), 2.6 * len(args.scenes)))
+  columns = COLUMNS + (B2X_COLUMNS[args.b2x],)
+  fig, axes = figures.subplots(len(args.scenes), 1 + len(columns),
+                              figsize=(3.2 * (1 + len(columns)), 2.6 * len(args.scenes)))
   for row, sc in enumerate(args.scenes):
     scene = load_scene(load_config(args.config, args.gin_bindings + [
         f'Config.data_dir = {args.data_dir!r}', f'Config.scene = {sc!r}']))
@@ -61,7 +69,7 @@ def main(argv=None):
                        f'{len(scene.test_idx)} test views')
     view = int(scene.test_idx[args.test_view])
     panels = [('photo', scene.images[view], None)]
-    for title, folder, r in COLUMNS:
+    for title, folder, r in columns:
       img, psnr = round_render(os.path.join(args.runs, sc, folder, f'seed{args.seed}'), r,
                                view)
       panels.append((title, img, psnr))

@@ -324,6 +324,11 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
                        cwd=REPO, capture_output=True, text=True, timeout=300, check=False)
   assert sub.returncode == 0, sub.stderr[-3000:]
   assert (out / 'renders.png').stat().st_size > 0 and tree_files(out / 's') == before
+  sub = subprocess.run(renders + ['--seed', '1', '--b2x', 'd_seed', '--out',
+                                  str(out / 'renders_d.png')],
+                       cwd=REPO, capture_output=True, text=True, timeout=300, check=False)
+  assert sub.returncode == 0, sub.stderr[-3000:]
+  assert (out / 'renders_d.png').read_bytes() != (out / 'renders.png').read_bytes()
   bad = subprocess.run(renders + ['--seed', '7', '--out', str(out / 'none.png')], cwd=REPO,
                        capture_output=True, text=True, timeout=300, check=False)
   assert bad.returncode == 1 and 'seed7/round_0/eval/test_' in bad.stderr
