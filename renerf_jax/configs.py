@@ -51,10 +51,9 @@ class Config:
   # axis is the origin, then scaled so the farthest camera is at distance 1 (the scene
   # box with them), as mip-NeRF 360 places unbounded scenes for its contraction.
   normalize_poses: bool = shared(False)
-  # transforms.json captures with OpenCV distortion or an off-centre principal point:
-  # the photos resampled to a centred pinhole camera of their size, the uncovered border
-  # cropped (datasets/undistort.py; COLMAP's undistorter). The Gaussians need it: they
-  # render centred pinhole cameras only.
+  # transforms.json: distorted or off-centre photos resampled to a centred pinhole camera
+  # of their size, the uncovered border cropped (datasets/undistort.py, as COLMAP does):
+  # the Gaussians render centred pinhole cameras only.
   undistort: bool = shared(False)
   llffhold: int = shared(8)  # Every llffhold-th image is a test view.
   # Blender layout (transforms_test.json): every test_stride-th test frame is a test view

@@ -18,6 +18,7 @@ from renerf_jax.gaussians import ply
 from renerf_jax.gaussians import render as render_lib
 from renerf_jax.gaussians import loss as gloss
 from renerf_jax.gaussians import schedule as gschedule
+from renerf_jax.gaussians import start as gstart
 from renerf_jax.gaussians.strategy import DensityStrategy
 from renerf_jax.gaussians import training as gtrain
 from renerf_jax.pseudo_views import PseudoViews
@@ -319,10 +320,10 @@ def test_views_seeing_counts_the_cameras_whose_image_holds_a_point():
   poses = np.stack([np.eye(4)[:3], shifted])
   points = np.array([[0., 0., -2.], [0., 0., 1.], [0., 0., -0.05], [-1.5, 0., -2.],
                      [1., 0., -2.], [1.5, 0., -2.], [0., 1., -2.]])
-  np.testing.assert_array_equal(gtrain.views_seeing(points, poses, 30., 24, 32, 0.1),
+  np.testing.assert_array_equal(gstart.views_seeing(points, poses, 30., 24, 32, 0.1),
                                 [2, 0, 0, 0, 2, 1, 0])
   np.testing.assert_array_equal(
-      gtrain.views_seeing(np.array([[2., 0., 0.], [0., 0., -2.]]), look_x[None], 30.,
+      gstart.views_seeing(np.array([[2., 0., 0.], [0., 0., -2.]]), look_x[None], 30.,
                           24, 32, 0.1), [1, 0])
 
 
@@ -331,7 +332,7 @@ def test_the_random_start_among_points_that_k_training_views_see(scene):
   (the box-uniform start has points that fewer see), the same for the same key; a box
   that no camera sees is refused in one line."""
   train = scene.poses[scene.train_idx]
-  count = lambda m: gtrain.views_seeing(m, train, scene.focal, scene.height, scene.width,
+  count = lambda m: gstart.views_seeing(m, train, scene.focal, scene.height, scene.width,
                                         scene.near)
   box = gtrain.init_gaussians(CFG, scene, jax.random.PRNGKey(0))
   assert np.mean(count(np.asarray(box.means)[np.asarray(box.active)]) < 2) > 0.05
@@ -347,7 +348,7 @@ def test_the_random_start_among_points_that_k_training_views_see(scene):
   np.testing.assert_array_equal(np.asarray(again.means), np.asarray(g.means))
   behind = train[:, :3, 3].mean(0) + 100. * train[:, :3, 2].mean(0)  # Behind them all.
   with pytest.raises(DataError, match='gs_init_views=2: only 0 of 2048 random points'):
-    gtrain.seen_points(jax.random.PRNGKey(0), 512, behind - 1., behind + 1., scene, 2,
+    gstart.seen_points(jax.random.PRNGKey(0), 512, behind - 1., behind + 1., scene, 2,
                        rounds=1)
 
 
