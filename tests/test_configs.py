@@ -393,6 +393,18 @@ def test_every_shipped_config_loads_and_binds_only_what_its_backbone_reads():
   assert (lego.scene, lego.n_input_views, lego.blender_split) == ('lego', 8, 'standard')
   assert (data.scene, data.n_input_views, data.normalize_poses) == ('fox', 12, True)
   assert _gin('gaussians_fox12.gin').undistort and not _gin('fox12.gin').undistort
+  # Both wide-baseline Gaussian configs take their recipe and protocol from one file and
+  # restate none of it.
+  with open(os.path.join(GIN, 'gaussians_wide_recipe.gin')) as f:
+    recipe = re.findall(r'^Config\.(\w+) = ', f.read(), re.M)
+  assert {'backbone', 'max_steps', 'pseudo_until_frac', 'use_masks'} <= set(recipe)
+  for name in ('gaussians_lego8.gin', 'gaussians_fox12.gin'):
+    with open(os.path.join(GIN, name)) as f:
+      text = f.read()
+    assert 'gaussians_wide_recipe.gin' in re.findall(r"^include '(.+)'", text, re.M), name
+    assert not set(re.findall(r'^Config\.(\w+) = ', text, re.M)) & set(recipe), name
+    c, r = _gin(name), _gin('gaussians_wide_recipe.gin')
+    assert [getattr(c, k) for k in recipe] == [getattr(r, k) for k in recipe], name
 
 
 def test_the_near_far_annealing_bounds_k_of_the_nerf_only():
