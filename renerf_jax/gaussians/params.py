@@ -82,8 +82,20 @@ def random_init(key, n, lo, hi, capacity=None, init_opacity=0.1, scale_factor=1.
   lo = jnp.asarray(lo, jnp.float32)
   hi = jnp.asarray(hi, jnp.float32)
   means = lo + (hi - lo) * jax.random.uniform(key, (capacity, 3))
-  return init_at(means, n, jnp.mean(hi - lo) / float(n)**(1. / 3.), init_opacity,
-                 scale_factor, knn)
+  return init_at(means, n, box_spacing(lo, hi, n), init_opacity, scale_factor, knn)
+
+
+def box_spacing(lo, hi, n):
+  """The spacing of n points spread evenly in the box [lo, hi]: mean side / n^(1/3).
+
+  Args:
+    lo, hi: [3] box corners. n: number of points (>= 1).
+
+  Returns:
+    float32 scalar.
+  """
+  lo = jnp.asarray(lo, jnp.float32)
+  return jnp.mean(jnp.asarray(hi, jnp.float32) - lo) / float(n)**(1. / 3.)
 
 
 def init_at(means, n, spacing, init_opacity=0.1, scale_factor=1., knn=False):

@@ -89,5 +89,5 @@ def init_gaussians(config, scene, key):
   n = config.gs_init_points
   means = np.zeros((config.gs_capacity, 3), np.float32)
   means[:n] = seen_points(key, n, lo, hi, scene, config.gs_init_views)
-  return params_lib.init_at(means, n, float(np.mean(hi - lo)) / float(n)**(1. / 3.),
+  return params_lib.init_at(means, n, params_lib.box_spacing(lo, hi, n),
                             init_opacity=config.gs_init_opacity, knn=config.gs_init_knn)
