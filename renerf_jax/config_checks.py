@@ -133,9 +133,9 @@ def check_config(c):
   _check(c.renerf_init in ('reset', 'continue'),
          f'Config.renerf_init={c.renerf_init!r} (reset or continue)')
   _check(c.mask_signal in ('laplace', 'one_minus_acc', 'depth_variance',
-                              'weight_entropy'),
+                              'weight_entropy', 'acc'),
          f'Config.mask_signal={c.mask_signal!r} (laplace, one_minus_acc, '
-         'depth_variance or weight_entropy)')
+         'depth_variance, weight_entropy or acc)')
   _check(c.pseudo_mix in ('pixels', 'fraction'),
          f'Config.pseudo_mix={c.pseudo_mix!r} (pixels or fraction)')
   _check(0. <= c.pseudo_frac <= 1.,

@@ -105,7 +105,8 @@ def test_compute_masks_takes_the_hessian_pass_from_sigma_fn(setup):
   np.testing.assert_array_equal(res.rgb, plain.rgb)
 
 
-@pytest.mark.parametrize('signal', ['one_minus_acc', 'depth_variance', 'weight_entropy'])
+@pytest.mark.parametrize('signal', ['one_minus_acc', 'depth_variance', 'weight_entropy',
+                                    'acc'])
 def test_hessian_free_masks_skip_the_hessian_pass(setup, signal, monkeypatch):
   config, params, pool = setup
   config = dataclasses.replace(config, mask_signal=signal, mask_keep_frac=0.7,
@@ -121,9 +122,28 @@ def test_hessian_free_masks_skip_the_hessian_pass(setup, signal, monkeypatch):
   np.testing.assert_allclose(res.rgb, plain['rgb'], atol=1e-6)
   if signal == 'one_minus_acc':
     np.testing.assert_allclose(res.uncertainty, np.clip(1. - plain['acc'], 0., 1.), atol=1e-6)
+  if signal == 'acc':
+    np.testing.assert_allclose(res.uncertainty, np.clip(plain['acc'], 0., 1.), atol=1e-6)
   assert np.all(np.isfinite(res.uncertainty)) and np.all(res.uncertainty >= 0.)
   assert res.mask.mean() == pytest.approx(0.7, abs=0.05)
   np.testing.assert_array_equal(res.mask, (res.uncertainty <= res.mu).astype(np.float32))
+
+
+def test_acc_and_one_minus_acc_at_one_half_split_object_and_background(setup):
+  # Issue 49 item 5: 'acc' at mask_threshold 0.5 keeps the pixels B renders empty,
+  # 'one_minus_acc' at 0.5 the opaque ones; together they cover every pixel once (both
+  # keep a pixel only at acc == 0.5 exactly).
+  config, params, pool = setup
+  pseudo = take(pool['rays'], np.arange(0, 600, 3))
+  res = {s: unc.compute_masks(dataclasses.replace(config, mask_signal=s, mask_threshold=.5,
+                                                  render_chunk=64),
+                              params, pool['rays'], pseudo, -1., 1.)
+         for s in ('acc', 'one_minus_acc')}
+  acc = np.asarray(render_flat(config, params, pseudo)['acc'])
+  assert 0. < acc.min() < .5 < acc.max()  # both regions are there to split
+  np.testing.assert_array_equal(res['acc'].mask, (acc <= .5).astype(np.float32))
+  np.testing.assert_array_equal(res['one_minus_acc'].mask, (acc >= .5).astype(np.float32))
+  assert np.all(res['acc'].mask + res['one_minus_acc'].mask >= 1.)
 
 
 def test_unknown_mask_signal_is_one_config_error():

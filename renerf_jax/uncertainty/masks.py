@@ -198,7 +198,8 @@ def _signal_chunk(config, params, rays):
   fine = render_rays(config, params, rays, jax.random.PRNGKey(0), train=False)[-1]
   u = {'one_minus_acc': lambda: sig.one_minus_acc(fine['acc']),
        'depth_variance': lambda: sig.depth_variance(fine['weights'], fine['t_vals']),
-       'weight_entropy': lambda: sig.weight_entropy(fine['weights'])}[config.mask_signal]()
+       'weight_entropy': lambda: sig.weight_entropy(fine['weights']),
+       'acc': lambda: sig.opacity(fine['acc'])}[config.mask_signal]()
   return {'u': u, 'rgb': fine['rgb']}
 
 

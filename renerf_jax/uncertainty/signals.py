@@ -108,6 +108,20 @@ def one_minus_acc(acc):
   return jnp.clip(1. - acc, 0., 1.)
 
 
+def opacity(acc):
+  """Accumulated opacity, clipped to [0, 1]: not an uncertainty but a region selector
+  (Config.mask_signal 'acc': with mask_threshold 0.5 the masks keep the pixels B renders
+  empty, the background; one_minus_acc at 0.5 keeps the object; issue 49 item 5).
+
+  Args:
+    acc: [...].
+
+  Returns:
+    [...].
+  """
+  return jnp.clip(acc, 0., 1.)
+
+
 # --------------------------------------------------------------- rendering of vertex values
 
 
