@@ -296,7 +296,7 @@ class Config:
   # 'one_minus_acc' (the default: the lowest mean AUSE over six scenes; the only one of
   # the Gaussians), 'depth_variance', 'weight_entropy' (uncertainty/signals.py; compared
   # in experiments/results/uncertainty_quality_llff/uq_tiny.md), 'laplace' (the Bayes'-Rays
-  # Hessian pass below), or 'acc' (opacity: at mask_threshold 0.5 the background alone).
+  # Hessian pass below), or 'acc' (NeRF: opacity; at mask_threshold 0.5 what B renders empty).
   mask_signal: str = renerf('one_minus_acc', 'masks')
   # L: the deformation grid has (2^L + 1)^3 vertices.
   deform_log2_res: int = renerf(8, 'hessian', backbone='nerf')

@@ -346,12 +346,15 @@ def test_the_random_start_among_points_that_k_training_views_see(scene):
   assert np.all(np.asarray(g.log_scales)[:len(m)] < np.log(np.max(hi - lo)))
   again = gtrain.init_gaussians(cfg, scene, jax.random.PRNGKey(0))
   np.testing.assert_array_equal(np.asarray(again.means), np.asarray(g.means))
-  # Without knn both starts share the box spacing (params.box_spacing), same means.
+  # Without knn both starts (box-uniform, seen points) share the box spacing
+  # (params.box_spacing).
   flat = gtrain.init_gaussians(dataclasses.replace(cfg, gs_init_knn=False), scene,
                                jax.random.PRNGKey(0))
-  np.testing.assert_array_equal(np.asarray(flat.means), np.asarray(g.means))
+  flat_box = gtrain.init_gaussians(dataclasses.replace(CFG, gs_init_knn=False), scene,
+                                   jax.random.PRNGKey(0))
   spacing = np.mean(hi - lo) / CFG.gs_init_points**(1. / 3.)
   np.testing.assert_allclose(np.exp(np.asarray(flat.log_scales)), spacing, rtol=1e-5)
+  np.testing.assert_array_equal(np.asarray(flat.log_scales), np.asarray(flat_box.log_scales))
   behind = train[:, :3, 3].mean(0) + 100. * train[:, :3, 2].mean(0)  # Behind them all.
   with pytest.raises(DataError, match='gs_init_views=2: only 0 of 2048 random points'):
     gstart.seen_points(jax.random.PRNGKey(0), 512, behind - 1., behind + 1., scene, 2,

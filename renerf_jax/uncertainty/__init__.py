@@ -5,7 +5,7 @@
   laplace      the Laplace (Gauss-Newton) Hessian diagonal of a trained NeRF w.r.t. the
                deformation grid, and the per-vertex sigma it gives.
   signals      per-pixel U variants from one render: Laplace, Bayes' Rays as released,
-               weight entropy, depth variance, 1 - acc.
+               weight entropy, depth variance, 1 - acc (and acc, a region selector).
   quality      how well a U ranks a model's per-pixel error: sparsification curves,
                AUSE, AURG, mask lift (pure numpy).
   masks        rendered U along pseudo-view rays, the threshold mu (mask_threshold, the

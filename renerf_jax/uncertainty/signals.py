@@ -110,8 +110,9 @@ def one_minus_acc(acc):
 
 def opacity(acc):
   """Accumulated opacity, clipped to [0, 1]: not an uncertainty but a region selector
-  (Config.mask_signal 'acc': with mask_threshold 0.5 the masks keep the pixels B renders
-  empty, the background; one_minus_acc at 0.5 keeps the object; issue 49 item 5).
+  (Config.mask_signal 'acc', NeRF only: with mask_threshold 0.5 the masks keep the pixels
+  B renders empty, e.g. lego's background; one_minus_acc at 0.5 keeps the opaque ones, the
+  object; issue 49 item 5). As a mask's "uncertainty" map it reads inverted.
 
   Args:
     acc: [...].
