@@ -222,8 +222,8 @@ def scene_runs(args, scene_name, base_bindings):
     for m in ms[:rounds + 1]:
       rows.setdefault('B' if m['round'] == 0 else f"R{m['round']}", {})[seed] = m
   for spec in args.variant:
-    label, _, extra = spec.partition('=')
-    cfg0 = load_config(args.config, bindings + [b for b in extra.split(';') if b.strip()])
+    label, extra = tables.variant_spec(spec)
+    cfg0 = load_config(args.config, bindings + extra)
     for seed in args.seeds:
       cfg = dataclasses.replace(cfg0, seed=seed, num_rounds=1)
       ms = run(cfg, scene, os.path.join(root, label, f'seed{seed}'),

@@ -32,6 +32,7 @@ the equal-time baseline as a point of its own).
 import argparse
 import dataclasses
 import os
+import re
 import shlex
 import sys
 
@@ -105,6 +106,22 @@ def command_line(module=None, argv=None):
 def mean_std(vals):
   vals = np.asarray(vals, np.float64)
   return float(vals.mean()), (float(vals.std(ddof=1)) if len(vals) > 1 else 0.)
+
+
+def variant_spec(spec):
+  """A --variant 'LABEL=binding;binding' -> (label, [bindings]).
+
+  The label ends at the first '=' that a 'Config.' binding follows, so a label may hold
+  '=' itself ('acc <= 0.5=Config.mask_threshold = 0.5'); with no such binding, at the
+  first '=' ('plain='); a spec without '=' is a label with no bindings.
+  """
+  m = re.search(r'=(?=\s*Config\.)', spec)
+  cut = m.start() if m else spec.find('=')
+  if cut < 0:
+    return spec, []
+  if cut == 0:
+    raise SystemExit(f"error: --variant {spec!r} is not 'LABEL=binding;binding'")
+  return spec[:cut], [b for b in spec[cut + 1:].split(';') if b.strip()]
 
 
 def label_values(specs, what, labels=None):
@@ -290,8 +307,7 @@ def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
   rows, curves, shared_rows, summaries, copied_rounds = [], {}, set(), {}, {}
   first_runs = None
   for vi, spec in enumerate(variants):
-    label, _, extra = spec.partition('=')
-    extra = [b for b in extra.split(';') if b.strip()]
+    label, extra = variant_spec(spec)
     config = load_config(args.config, bindings + extra)
     if not any(b.replace(' ', '').startswith('Config.num_rounds=') for b in extra):
       config = dataclasses.replace(config, num_rounds=args.rounds)
@@ -299,7 +315,8 @@ def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
     runs, dirs, copied, rounds_copied = [], [], [], []
     for seed in args.seeds:
       run_dir = os.path.join(root, label, f'seed{seed}')
-      share = [os.path.join(root, v.partition('=')[0], f'seed{seed}') for v in variants[:vi]]
+      share = [os.path.join(root, variant_spec(v)[0], f'seed{seed}')
+               for v in variants[:vi]]
       if args.baseline_from:
         share.append(args.baseline_from.format(seed=seed))
       metrics, src, rounds_src = run_seed(dataclasses.replace(config, seed=seed), scene,

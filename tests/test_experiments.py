@@ -140,6 +140,19 @@ def test_rounds_table_shares_baselines_and_trains_the_equal_time_control(tmp_pat
   assert bad.returncode != 0 and 'unknown label' in bad.stderr
 
 
+def test_variant_labels_may_hold_an_equals_sign():
+  from experiments import tables  # pylint: disable=g-import-not-at-top
+  spec = "bg (acc <= 0.5)=Config.use_masks = True; Config.mask_threshold = 0.5"
+  assert tables.variant_spec(spec) == ('bg (acc <= 0.5)', ['Config.use_masks = True',
+                                                           ' Config.mask_threshold = 0.5'])
+  assert tables.variant_spec('K 0=Config.pseudo_until_frac = 0.') == (
+      'K 0', ['Config.pseudo_until_frac = 0.'])
+  assert tables.variant_spec('plain=') == ('plain', [])
+  assert tables.variant_spec('Re-Nerfing') == ('Re-Nerfing', [])  # as before: no bindings
+  with pytest.raises(SystemExit, match='is not .LABEL=binding'):
+    tables.variant_spec('=Config.seed = 1')
+
+
 def test_metric_curves_follow_each_variant_over_its_rounds():
   from experiments import tables  # pylint: disable=g-import-not-at-top
   rows = lambda label, pts: [dict(variant=label, cumulative_seconds=t, psnr=p, psnr_std=.3,
