@@ -306,6 +306,7 @@ def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
              'seeds': args.seeds, 'variants': [], 'command': command_line()}
   rows, curves, shared_rows, summaries, copied_rounds = [], {}, set(), {}, {}
   first_runs = None
+  labels = [variant_spec(v)[0] for v in variants]
   for vi, spec in enumerate(variants):
     label, extra = variant_spec(spec)
     config = load_config(args.config, bindings + extra)
@@ -315,8 +316,7 @@ def run_table(args, variants, paper=None, equal_time=False, paper_note=''):
     runs, dirs, copied, rounds_copied = [], [], [], []
     for seed in args.seeds:
       run_dir = os.path.join(root, label, f'seed{seed}')
-      share = [os.path.join(root, variant_spec(v)[0], f'seed{seed}')
-               for v in variants[:vi]]
+      share = [os.path.join(root, lb, f'seed{seed}') for lb in labels[:vi]]
       if args.baseline_from:
         share.append(args.baseline_from.format(seed=seed))
       metrics, src, rounds_src = run_seed(dataclasses.replace(config, seed=seed), scene,
