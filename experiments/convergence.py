@@ -1,4 +1,9 @@
-"""Is the baseline B converged? Test metrics of B trained for several step counts.
+"""Is the baseline B converged? Validation metrics of B trained for several step counts.
+
+B's length is chosen on validation views (Config.val_views > 0: views neither trained on
+nor tested, datasets/split.py), never on test views: the table scores the runs'
+val_<metric> means (--score_on val, the default); --score_on test re-tabulates the runs
+of the tables made before issue 60 as they were made, on test views.
 
 A converged B is one that 2x more steps no longer improves (issue 18: B trained 2x longer
 gains at most 0.1 dB PSNR and 0.005 SSIM, mean over seeds). The lr schedule depends on
@@ -46,6 +51,9 @@ def parser():
   p.add_argument('--steps', type=int, nargs='+', required=True, help='max_steps values')
   p.add_argument('--gin_bindings', action='append', default=[])
   p.add_argument('--out', default='experiments/results')
+  p.add_argument('--score_on', choices=('val', 'test'), default='val',
+                 help='score on validation views (Config.val_views > 0; the rule) or on '
+                 'test views (the tables made before issue 60)')
   p.add_argument('--train', action=argparse.BooleanOptionalAction, default=True,
                  help='train missing runs (--no-train: only tabulate finished ones)')
   return p
@@ -63,8 +71,19 @@ def finished(root, scene, steps, seed):
   return report.read_json(rundir.result_path(rdir))
 
 
-def summarize(root, scenes, seeds, steps):
-  """Rows per (scene, N): mean +- std and the paired gain of the next N (= 2N if given)."""
+def score(result, metric, on, where):
+  """A finished run's mean `metric` on validation (on='val') or test views (on='test');
+  ValueError naming the run where it has no validation metrics."""
+  key = metric if on == 'test' else f'val_{metric}'
+  if key not in result['metrics']:
+    raise ValueError(f'{where}: no validation metrics (bind Config.val_views > 0, or '
+                     '--score_on test for the tables made before issue 60)')
+  return result['metrics'][key]
+
+
+def summarize(root, scenes, seeds, steps, on='val'):
+  """Rows per (scene, N): mean +- std and the paired gain of the next N (= 2N if given),
+  scored on validation (on='val') or test views."""
   rows = []
   for scene in scenes:
     for i, n in enumerate(steps):
@@ -73,8 +92,12 @@ def summarize(root, scenes, seeds, steps):
       if not res:
         continue
       row = {'scene': scene, 'steps': n, 'seeds': len(res)}
-      for k in METRICS + ('round_seconds',):
-        row[k], row[k + '_std'] = mean_std([r['metrics'][k] for r in res.values()])
+      where = lambda s: run_dir_of(root, scene, n, s)
+      for k in METRICS:
+        row[k], row[k + '_std'] = mean_std([score(r, k, on, where(s))
+                                            for s, r in res.items()])
+      row['round_seconds'], row['round_seconds_std'] = mean_std(
+          [r['metrics']['round_seconds'] for r in res.values()])
       nxt = steps[i + 1] if i + 1 < len(steps) else None
       if nxt == 2 * n:
         more = {s: finished(root, scene, nxt, s) for s in res}
@@ -83,13 +106,14 @@ def summarize(root, scenes, seeds, steps):
           row['paired_2x'] = len(paired)
           for k in METRICS:
             row[f'gain_2x_{k}'], row[f'gain_2x_{k}_std'] = mean_std(
-                [more[s]['metrics'][k] - res[s]['metrics'][k] for s in paired])
+                [score(more[s], k, on, where(s)) - score(res[s], k, on, where(s))
+                 for s in paired])
           row['converged'] = bool(all(row[f'gain_2x_{k}'] <= v for k, v in MAX_GAIN.items()))
       rows.append(row)
   return rows
 
 
-def markdown(rows, command):
+def markdown(rows, command, on='val'):
   fmt = lambda r, k, d=3: (f"{r[k]:.{d}f} +- {r[k + '_std']:.{d}f}" if k in r else '')
   lines = ['| scene | steps | seeds | PSNR | SSIM | LPIPS-alex | train s | 2x gain PSNR '
            '| 2x gain SSIM | 2x gain LPIPS | converged |',
@@ -101,13 +125,15 @@ def markdown(rows, command):
         f"{fmt(r, 'ssim')} | {fmt(r, 'lpips_alex')} | {r['round_seconds']:.0f} | "
         f"{fmt(r, 'gain_2x_psnr', 2)} | {fmt(r, 'gain_2x_ssim')} | "
         f"{fmt(r, 'gain_2x_lpips_alex')} | {verdict} |")
-  return ('\n'.join(lines) + '\n\n"2x gain": metric at 2N steps minus at N, paired by seed '
+  views = 'validation views' if on == 'val' else 'test views (made before issue 60)'
+  return ('\n'.join(lines) + f'\n\nScored on {views}. '
+          '"2x gain": metric at 2N steps minus at N, paired by seed '
           f'(mean +- std). Converged: PSNR gain <= {MAX_GAIN["psnr"]} dB and SSIM gain <= '
           f'{MAX_GAIN["ssim"]}. "train s": wall seconds of training as logged (they depend '
           'on what else shared the CPU).\n\nCommand:\n\n    ' + command + '\n')
 
 
-def plot(rows, scenes, path):
+def plot(rows, scenes, path, on='val'):
   fig, axes = figures.subplots(len(METRICS), 2, figsize=(10, 2.6 * len(METRICS)))
   for scene in scenes:
     rs = [r for r in rows if r['scene'] == scene]
@@ -122,7 +148,8 @@ def plot(rows, scenes, path):
         axes[i, j].set_xlabel('max_steps' if x == 'steps' else 'training seconds')
         axes[i, j].set_ylabel(k)
   axes[0, 0].legend()
-  fig.suptitle('baseline B at N steps (decayed lr): test metrics, mean +- std over seeds')
+  fig.suptitle(f'baseline B at N steps (decayed lr): {"validation" if on == "val" else "test"}'
+               ' metrics, mean +- std over seeds')
   fig.tight_layout()
   figures.save_figure(fig, path, dpi=100)
 
@@ -147,16 +174,22 @@ def main(argv=None):
     jit_cache.release_compiled()
     bar.update(n)
   bar.close()
-  rows = summarize(root, args.scenes, args.seeds, steps)
+  try:
+    rows = summarize(root, args.scenes, args.seeds, steps, args.score_on)
+  except ValueError as e:
+    print(f'error: {e}', file=sys.stderr)
+    sys.exit(2)
   # The command that reproduces the table (the runs are reused, or trained when missing).
   command = command_line('experiments.convergence',
                          [a for a in sys.argv[1:] if a != '--no-train'])
   report.write_json(os.path.join(args.out, args.name + '.json'),
                     {'name': args.name, 'config': args.config, 'bindings': args.gin_bindings,
-                     'rows': rows, 'max_gain': MAX_GAIN, 'command': command})
-  report.write_markdown(os.path.join(args.out, args.name + '.md'), markdown(rows, command))
-  plot(rows, args.scenes, os.path.join(args.out, args.name + '.png'))
-  print(markdown(rows, command))
+                     'rows': rows, 'max_gain': MAX_GAIN, 'command': command,
+                     'scored_on': args.score_on})
+  text = markdown(rows, command, args.score_on)
+  report.write_markdown(os.path.join(args.out, args.name + '.md'), text)
+  plot(rows, args.scenes, os.path.join(args.out, args.name + '.png'), args.score_on)
+  print(text)
 
 
 if __name__ == '__main__':

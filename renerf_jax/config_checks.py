@@ -49,9 +49,15 @@ def check_config(c):
   _check(c.backbone in ('nerf', 'gaussians'),
          f'Config.backbone={c.backbone!r} (nerf or gaussians)')
   check_backbone_fields(c)
-  _check(c.dataset_loader in ('llff', 'transforms', 'blender', 'procedural', 'orbit'),
-         f'Config.dataset_loader={c.dataset_loader!r} (llff, transforms, blender, '
+  _check(c.dataset_loader in ('llff', 'transforms', 'colmap', 'blender', 'procedural',
+                              'orbit'),
+         f'Config.dataset_loader={c.dataset_loader!r} (llff, transforms, colmap, blender, '
          'procedural or orbit)')
+  _check(c.train_view_selection in ('linspace', 'coverage'),
+         f'Config.train_view_selection={c.train_view_selection!r} (linspace or coverage)')
+  _check(isinstance(c.val_views, int) and c.val_views >= 0,
+         f'Config.val_views={c.val_views!r} must be an integer >= 0')
+  _check(c.gs_init in ('random', 'sfm'), f'Config.gs_init={c.gs_init!r} (random or sfm)')
   _check(c.test_stride >= 1, f'Config.test_stride={c.test_stride} must be >= 1')
   _check(c.blender_split in ('standard', 'linspace'),
          f'Config.blender_split={c.blender_split!r} (standard or linspace)')

@@ -30,14 +30,12 @@ class Config:
 
   Each field is declared by its concern (shared, nerf, gaussians, renerf, report: see
   config_fields), which records the backbone that reads it and what it can change
-  (`affects`). The declaration order is the order in which a run directory's config.gin
-  and config.json list the fields, kept as it was: the section comments name the concern
-  of each block, and a few shared fields sit inside a block of another concern.
+  (`affects`). Run directories list the fields in this declaration order; the section
+  comments name each block's concern (a few shared fields sit in another's block).
   """
   # --- shared: data and split ---
-  # 'llff', 'transforms' (Instant-NGP / nerfstudio transforms.json), 'blender',
-  # 'procedural' (the embedded forward-facing scene) or 'orbit' (the embedded 360-degree
-  # scene).
+  # 'llff', 'transforms' (Instant-NGP / nerfstudio transforms.json), 'colmap' (sparse/0),
+  # 'blender', 'procedural' (embedded forward-facing) or 'orbit' (embedded 360 degrees).
   dataset_loader: str = shared('llff')
   # Folder that holds the scene folders (e.g. .../nerf_llff_data).
   data_dir: str = shared('')
@@ -56,28 +54,28 @@ class Config:
   # the Gaussians render centred pinhole cameras only.
   undistort: bool = shared(False)
   llffhold: int = shared(8)  # Every llffhold-th image is a test view.
+  # Captures: how the n_input_views training views are chosen from the non-test photos,
+  # 'linspace' (evenly by index) or 'coverage' (the paper's mip-NeRF 360 split: farthest
+  # cameras first); and val_views validation views from the photos neither split uses
+  # (datasets/split.py). Blender's layout: blender_split, and val from transforms_val.json.
+  train_view_selection: str = shared('linspace')
+  val_views: int = shared(0)
   # Blender layout (transforms_test.json): every test_stride-th test frame is a test view
   # (the few-shot Blender protocol of DietNeRF / FreeNeRF: 8, i.e. 25 of lego's 200).
   test_stride: int = shared(1)
-  # Blender layout: which n_input_views frames of transforms_train.json train.
-  # 'standard': the few-shot split of DietNeRF, RegNeRF, FreeNeRF, FSGS and DNGaussian
-  # (train ids 26, 86, 2, 55, 75, 93, 16, 73; the first n_input_views of them);
-  # 'linspace': evenly spaced over the train frames (this project's split before
-  # issue 49).
+  # Blender layout: which n_input_views frames of transforms_train.json train. 'standard':
+  # the few-shot split of DietNeRF ... DNGaussian (train ids 26, 86, 2, 55, 75, 93, 16,
+  # 73, the first n_input_views); 'linspace': evenly spaced (before issue 49).
   blender_split: str = shared('standard')
   white_bkgd: bool = shared(False)  # Composite on white (Blender).
   # NDC space for forward-facing scenes; never for 360 scenes.
   use_ndc: bool = shared(True)
   near: float = shared(0.)  # Near plane (NDC: 0).
   far: float = shared(1.)  # Far plane (NDC: 1).
-  # (scene, near) pairs: that LLFF scene's per-image near bounds are raised to at least
-  # `near` (poses_bounds.npy units) before RegNeRF's scaling by 1 / (0.75 min near).
-  # Corrects a capture whose bounds came from spurious near points (the loader warns when
-  # bounds look like that); gin_configs/modifiers/shared_bounds.gin has the values
-  # measured for ../shared/data's re-processed room and trex. Off: (). Only the pair of
-  # Config.scene is kept (so a run of another scene has the same Config with or without
-  # the modifier, and its run directory stays reusable): set the scene through gin or the
-  # constructor, never with dataclasses.replace (the other scenes' pairs are gone).
+  # (scene, near) pairs: that LLFF scene's near bounds raised to at least `near` (before
+  # RegNeRF's scaling), for bounds from spurious near points (modifiers/shared_bounds.gin:
+  # room, trex). Off: (). Only Config.scene's pair is kept (a run of another scene stays
+  # reusable): set the scene through gin, never with dataclasses.replace.
   llff_min_near: Tuple[Tuple[str, float], ...] = shared(())
   procedural_size: Tuple[int, int] = shared((48, 64))  # (H, W) of an embedded scene.
   procedural_views: int = shared(17)  # Number of images an embedded scene renders.
@@ -143,8 +141,7 @@ class Config:
   gs_capacity: int = gaussians(20000)  # Slots; densification fills the inactive ones.
   gs_init_points: int = gaussians(5000)  # Random initial Gaussians in Scene.world_bounds.
   gs_init_opacity: float = gaussians(0.1)  # Their opacity (3DGS: 0.1).
-  # Their scale: 3DGS's 3-nearest-neighbour distance (else the box spacing, box side /
-  # gs_init_points^(1/3)).
+  # Their scale: 3DGS's 3-nearest-neighbour distance (else box side / n^(1/3)).
   gs_init_knn: bool = gaussians(True)
   # 0: the random start is uniform in Scene.world_bounds (3DGS on Blender); k >= 1:
   # uniform among the box's points that k or more training cameras see (in the image,
@@ -152,6 +149,9 @@ class Config:
   # background, fox), keeping Gaussians out of the space that no training view
   # constrains and, from k = 2, off the cameras' own lenses.
   gs_init_views: int = gaussians(0)
+  # 'random': the start above; 'sfm': the scene's SfM points that 2 or more training views
+  # see (COLMAP tracks, else projection), at their colours (gaussians/start.py).
+  gs_init: str = gaussians('random')
   # At most this many Gaussians (the nearest) per 16x16 tile; 0: all (up to the capacity).
   gs_tile_cap: int = gaussians(0)
   # With gs_tile_cap 0, the rasteriser's pair buffer: K x this (8x8 pixel block,

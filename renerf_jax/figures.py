@@ -183,3 +183,40 @@ def colorize(x, lo=None, hi=None, cmap='turbo', invalid_color=(0., 0., 0.)):
   rgb = matplotlib.colormaps[cmap](t)[..., :3]
   rgb[~valid] = np.asarray(invalid_color, dtype=np.float64)
   return np.clip(rgb, 0., 1.).astype(np.float32)
+
+
+SPLIT_STYLE = {'unused': ('lightgrey', 12), 'test': ('tab:red', 30), 'validation': ('tab:green', 30),
+         'train': ('tab:blue', 36)}
+
+
+def plane_axes(centres):
+  """The two principal axes of camera centres [N, 3] (rows [2, 3]): the capture's floor."""
+  centred = centres - centres.mean(0)
+  return np.linalg.svd(centred, full_matrices=False)[2][:2]
+
+
+def draw_split(ax, scene, title):
+  """A capture's cameras seen from above (the centres' two principal axes), each with a
+  stroke along its viewing direction: training views (numbered in the order chosen),
+  validation, test and unused views (experiments/plot_split.py, the capture notebook)."""
+  centres = np.asarray(scene.poses[:, :3, 3], np.float64)
+  axes = plane_axes(centres)
+  xy = (centres - centres.mean(0)) @ axes.T
+  dirs = -np.asarray(scene.poses[:, :3, 2], np.float64) @ axes.T
+  length = 0.06 * np.ptp(xy, axis=0).max()
+  groups = {'unused': np.setdiff1d(np.arange(len(xy)), np.concatenate(
+      [scene.train_idx, scene.val_idx, scene.test_idx])), 'test': scene.test_idx,
+            'validation': scene.val_idx, 'train': scene.train_idx}
+  for name, idx in groups.items():
+    idx = np.asarray(idx, int)
+    colour, size = SPLIT_STYLE[name]
+    ax.scatter(xy[idx, 0], xy[idx, 1], s=size, c=colour, label=f'{name} ({len(idx)})',
+               zorder=3 if name == 'train' else 2)
+    for i in idx:
+      ax.plot([xy[i, 0], xy[i, 0] + length * dirs[i, 0]],
+              [xy[i, 1], xy[i, 1] + length * dirs[i, 1]], c=colour, lw=0.8)
+  for k, i in enumerate(scene.train_idx):
+    ax.annotate(str(k + 1), xy[i], fontsize=6, xytext=(2, 2), textcoords='offset points')
+  ax.set_aspect('equal')
+  ax.set_title(title, fontsize=9)
+  ax.legend(fontsize=7, loc='best')

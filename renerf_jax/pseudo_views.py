@@ -86,8 +86,10 @@ def pseudo_view_poses(config, scene):
 
 
 def unused_views(scene):
-  """Indices of the scene's photos that are neither training nor test views, ascending."""
+  """Indices of the scene's photos that are neither training, test nor validation views,
+  ascending."""
   used = set(np.asarray(scene.train_idx).tolist()) | set(np.asarray(scene.test_idx).tolist())
+  used |= set(np.asarray(scene.val_idx).tolist())  # Validation views stay unseen.
   return np.array([i for i in range(len(scene.poses)) if i not in used], np.int64)
 
 

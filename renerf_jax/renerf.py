@@ -17,6 +17,7 @@ import dataclasses
 from typing import Any, Callable, Optional, Tuple
 
 import flax
+import numpy as np
 
 from renerf_jax import backbones, fit, metrics, report
 from renerf_jax.errors import ConfigError
@@ -60,6 +61,13 @@ def control_config(config, steps=None):
   for `steps` steps (None: B's). It differs from R1 in the pseudo-views alone."""
   return dataclasses.replace(round_config(config, 1), num_rounds=0, seed_control=False,
                              max_steps=config.max_steps if steps is None else steps)
+
+
+def validation_scene(scene):
+  """The scene with its validation views in the place of the test views (evaluation
+  renders and scores Scene.test_idx)."""
+  return dataclasses.replace(scene, test_idx=np.asarray(scene.val_idx),
+                             val_idx=np.zeros(0, np.int64))
 
 
 def round_step(config, scene, state: RoundState, show_progress: bool = False,
@@ -107,6 +115,10 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
   ev = evaluate_fn(cfg, scene, result.state.params)
   metrics = dict(ev.mean, round=r, round_seconds=synth_seconds + result.train_seconds,
                  cumulative_seconds=seconds, nan_skips=int(result.state.nan_skips))
+  if len(scene.val_idx):  # The validation views' means as val_<metric> (not stored).
+    val = backbone.evaluate(cfg, validation_scene(scene), result.state.params,
+                            show_progress=False)
+    metrics.update({f'val_{k}': v for k, v in val.mean.items()})
   return RoundState(params=result.state.params, pseudo=pseudo, round_index=r,
                     metrics=state.metrics + (metrics,),
                     curves=state.curves + (result.curve,), seconds=seconds)
@@ -149,14 +161,16 @@ CONTROL_NAME = "control (D's seed, no pseudo-views)"
 
 def rounds_table(metrics, control=None):
   """Markdown table of per-round test metrics in the shape of the paper's 3-view table
-  (the seed-matched control's metrics, when given, as a row after the baseline)."""
+  (the seed-matched control's metrics, when given, as a row after the baseline), and the
+  validation views' where the scene has them."""
   rows = [dict(m, name='baseline' if m['round'] == 0 else f"Re-Nerfing R{m['round']}")
           for m in metrics]
   if control is not None:
     rows.insert(1, dict(control, name=CONTROL_NAME))
   cols = [('name', 'round'), ('psnr', 'PSNR'), ('ssim', 'SSIM'),
           ('lpips_alex', 'LPIPS-alex'), ('lpips_vgg', 'LPIPS-vgg'), ('avg_err', 'avg err'),
-          ('cumulative_seconds', 'cum. time [s]')]
+          ('cumulative_seconds', 'cum. time [s]'), ('val_psnr', 'val PSNR'),
+          ('val_ssim', 'val SSIM'), ('val_lpips_alex', 'val LPIPS-alex')]
   return report.markdown_table(rows, [c for c in cols if c[0] == 'name' or
                                       any(c[0] in m for m in metrics)])
 

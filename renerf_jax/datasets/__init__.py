@@ -1,4 +1,4 @@
-"""Datasets: LLFF, transforms.json (Instant-NGP / nerfstudio), Blender and the two embedded
+"""Datasets: LLFF, transforms.json (Instant-NGP / nerfstudio), COLMAP, Blender and the two embedded
 scenes (forward-facing 'procedural', 360-degree 'orbit'), behind one `load_scene`."""
 from renerf_jax.datasets.scene import (Scene, camera_rays, downsample_scene, fewshot_split,
                                        ray_pool)
@@ -15,6 +15,9 @@ def load_scene(config) -> Scene:
   elif config.dataset_loader == 'transforms':
     from renerf_jax.datasets.transforms import load_transforms  # pylint: disable=g-import-not-at-top
     scene = load_transforms(config)
+  elif config.dataset_loader == 'colmap':
+    from renerf_jax.datasets.colmap import load_colmap  # pylint: disable=g-import-not-at-top
+    scene = load_colmap(config)
   elif config.dataset_loader == 'blender':
     from renerf_jax.datasets.blender import load_blender  # pylint: disable=g-import-not-at-top
     scene = load_blender(config)

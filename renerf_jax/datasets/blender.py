@@ -6,6 +6,7 @@ import numpy as np
 
 from renerf_jax.datasets import images as image_io
 from renerf_jax.datasets.scene import Scene
+from renerf_jax.datasets.split import evenly_spaced
 from renerf_jax.errors import DataError
 
 
@@ -82,6 +83,14 @@ def load_blender(config) -> Scene:
   te_paths, te_poses, _ = read_split(scene_dir, 'test')
   pick, keep = blender_split(len(tr_paths), len(te_paths), config, scene_dir)
   te_paths, te_poses = [te_paths[i] for i in keep], te_poses[keep]
+  if config.val_views:  # Evenly spaced frames of transforms_val.json.
+    va_paths, va_poses, _ = read_split(scene_dir, 'val')
+    if config.val_views > len(va_paths):
+      raise DataError(f'Config.val_views={config.val_views} but '
+                      f'{scene_dir}/transforms_val.json has {len(va_paths)} frames')
+    vpick = evenly_spaced(np.arange(len(va_paths)), config.val_views)
+    te_paths += [va_paths[i] for i in vpick]
+    te_poses = np.concatenate([te_poses, va_poses[vpick]], 0)
   paths = [tr_paths[i] for i in pick] + te_paths
   rgba = image_io.read_images(paths, keep_alpha=True)
   rgb, alpha = rgba[..., :3], rgba[..., 3:]
@@ -93,7 +102,9 @@ def load_blender(config) -> Scene:
   return Scene(name=config.scene, images=images.astype(np.float32),
                poses=poses.astype(np.float32), focal=float(focal), near=config.near,
                far=config.far, use_ndc=False, white_bkgd=config.white_bkgd,
-               train_idx=np.arange(n_tr), test_idx=np.arange(n_tr, len(paths)),
+               train_idx=np.arange(n_tr),
+               test_idx=np.arange(n_tr, len(paths) - config.val_views),
+               val_idx=np.arange(len(paths) - config.val_views, len(paths)),
                forward_facing=False,
                bbox=((-1.5, -1.5, -1.5), (1.5, 1.5, 1.5)),
                world_bounds=((-1.5, -1.5, -1.5), (1.5, 1.5, 1.5)))

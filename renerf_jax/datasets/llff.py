@@ -6,7 +6,8 @@ import numpy as np
 
 from renerf_jax import cameras
 from renerf_jax.datasets import images as image_io
-from renerf_jax.datasets.scene import (Scene, fewshot_split, focus_depth_from_bounds,
+from renerf_jax.datasets.split import split_of
+from renerf_jax.datasets.scene import (Scene, focus_depth_from_bounds,
                                        frustum_bounds)
 from renerf_jax.errors import DataError
 
@@ -109,11 +110,11 @@ def load_llff(config) -> Scene:
   focal = float(poses_raw[0, 2, 4]) / config.factor
   poses = cameras.llff_to_opengl(poses_raw[:, :, :4])
   poses, bounds, _ = cameras.process_llff_poses(poses, bounds)
-  train_idx, test_idx = fewshot_split(len(paths), config.n_input_views, config.llffhold)
+  train_idx, val_idx, test_idx = split_of(config, poses, bounds_path)
   near, far = (0., 1.) if config.use_ndc else (float(bounds.min() * .9), float(bounds.max()))
   return Scene(name=config.scene, images=images.astype(np.float32),
                poses=poses.astype(np.float32), focal=focal, near=near, far=far,
                use_ndc=config.use_ndc, white_bkgd=config.white_bkgd,
-               train_idx=train_idx, test_idx=test_idx, forward_facing=True, focus_depth=focus_depth_from_bounds(bounds),
+               train_idx=train_idx, test_idx=test_idx, val_idx=val_idx, forward_facing=True, focus_depth=focus_depth_from_bounds(bounds),
                bbox=((-1.,) * 3, (1.,) * 3) if config.use_ndc else ((-far,) * 3, (far,) * 3),
                world_bounds=frustum_bounds(poses[train_idx], bounds[train_idx], focal, h, w))

@@ -6,7 +6,7 @@ depth is finite), lit by one directional light with hard shadows and ambient lig
 cameras circle the objects at distance 3.2 on a wavy orbit (elevation 16 to 40 degrees),
 looking at (0, 0, 0.35); world z is up. Every Config.llffhold-th camera is a test view
 and Config.n_input_views training views are spread over the others as over a
-transforms.json capture's (`scene.fewshot_split`: evenly from the first to the last, so
+transforms.json capture's (`split.split_views`: evenly from the first to the last, so
 on the closed orbit the last and the first are closer: with 48 cameras and 12 views the
 gaps are 30 to 37.5 degrees and one of 15), the test views between them.
 
@@ -21,7 +21,8 @@ import numpy as np
 
 from renerf_jax import cameras
 from renerf_jax.datasets.procedural import camera_directions, palette
-from renerf_jax.datasets.scene import Scene, fewshot_split
+from renerf_jax.datasets.scene import Scene
+from renerf_jax.datasets.split import split_of
 from renerf_jax.datasets.transforms import object_scene
 
 # (centre x, y, z, radius, texture frequency, hue phase)
@@ -212,7 +213,7 @@ def load_orbit(config) -> Scene:
   focal = 0.5 * w / np.tan(np.deg2rad(26.))  # A 52-degree horizontal field of view.
   poses = camera_poses(config.procedural_views)
   images, depths = render_views(poses, h, w, focal)
-  train_idx, test_idx = fewshot_split(len(poses), config.n_input_views, config.llffhold)
+  train_idx, val_idx, test_idx = split_of(config, poses, 'the orbit scene')
   box = ((-_FLOOR_RADIUS,) * 2 + (-0.1,), (_FLOOR_RADIUS,) * 2 + (1.2,))
   return object_scene(config, 'orbit', images, poses, focal, box, train_idx, test_idx,
-                      depths=depths)
+                      depths=depths, val_idx=val_idx)

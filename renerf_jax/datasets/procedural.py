@@ -10,7 +10,8 @@ scene exercises the same code path as the reference LLFF case.
 import numpy as np
 
 from renerf_jax import cameras
-from renerf_jax.datasets.scene import (Scene, fewshot_split, focus_depth_from_bounds,
+from renerf_jax.datasets.split import split_of
+from renerf_jax.datasets.scene import (Scene, focus_depth_from_bounds,
                                        frustum_bounds)
 
 # (centre x, y, z, radius, texture frequency, hue phase)
@@ -128,12 +129,12 @@ def load_procedural(config) -> Scene:
   bounds = np.stack([np.percentile(depths.reshape(len(poses), -1), 0.1, axis=1) * 0.9,
                      np.percentile(depths.reshape(len(poses), -1), 99.9, axis=1) * 1.1], -1)
   poses, bounds, scale = cameras.process_llff_poses(poses, bounds)
-  train_idx, test_idx = fewshot_split(len(poses), config.n_input_views, config.llffhold)
+  train_idx, val_idx, test_idx = split_of(config, poses, 'the procedural scene')
   near, far = (0., 1.) if config.use_ndc else (float(bounds.min() * .9), float(bounds.max()))
   return Scene(name='procedural', images=images.astype(np.float32),
                poses=poses.astype(np.float32), focal=float(focal), near=near, far=far,
                use_ndc=config.use_ndc, white_bkgd=False, train_idx=train_idx,
-               test_idx=test_idx, depths=(depths * scale).astype(np.float32),
+               test_idx=test_idx, val_idx=val_idx, depths=(depths * scale).astype(np.float32),
                forward_facing=True, focus_depth=focus_depth_from_bounds(bounds),
                bbox=((-1.,) * 3, (1.,) * 3) if config.use_ndc else ((-far,) * 3, (far,) * 3),
                world_bounds=frustum_bounds(poses[train_idx], bounds[train_idx], focal, h, w))

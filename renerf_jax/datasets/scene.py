@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from renerf_jax import cameras
+from renerf_jax.datasets import split
 from renerf_jax.errors import DataError
 
 
@@ -36,6 +37,14 @@ class Scene:
   # Every view's rays use them (camera_rays); the random unobserved poses of RegNeRF's
   # depth TV are virtual cameras and stay the centred pinhole of `focal` = fx.
   intrinsics: Optional[tuple] = None
+  # Validation views (datasets/split.py): neither trained on nor tested; [n_val] int.
+  val_idx: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
+  # The capture's SfM points where it has them (COLMAP's points3D, a nerfstudio ply), in
+  # the scene's world frame: [P, 3] float32 positions, [P, 3] float32 colours in [0, 1],
+  # and [P, N] bool, which images see each point (COLMAP's tracks), or None (unknown).
+  points: Optional[np.ndarray] = None
+  point_colors: Optional[np.ndarray] = None
+  point_views: Optional[np.ndarray] = None
 
   @property
   def height(self) -> int:
@@ -121,24 +130,14 @@ def frustum_bounds(poses, bounds, focal, height, width, depth_cap=FRUSTUM_DEPTH_
 
 
 def fewshot_split(n_images, n_input_views, llffhold=8):
-  """RegNeRF's LLFF split: test = every llffhold-th image; n train views evenly spread.
-
-  Args:
-    n_images: images in the scene.
-    n_input_views: training views to pick from the non-test images.
-    llffhold: test hold-out period.
+  """RegNeRF's LLFF split: test = every llffhold-th image; n train views evenly spread
+  (split.split_views with 'linspace' and no validation views).
 
   Returns:
     (train_idx, test_idx) int arrays.
   """
-  all_idx = np.arange(n_images)
-  test_idx = all_idx[::llffhold]
-  rest = np.array([i for i in all_idx if i not in set(test_idx.tolist())])
-  if n_input_views > len(rest):
-    raise DataError(f'Config.n_input_views={n_input_views} but only {len(rest)} '
-                    f'non-test images are available')
-  pick = np.round(np.linspace(0, len(rest) - 1, n_input_views)).astype(int)
-  return rest[pick], test_idx
+  train, _, test = split.split_views(np.zeros((n_images, 3, 4)), n_input_views, llffhold)
+  return train, test
 
 
 @functools.lru_cache(maxsize=64)

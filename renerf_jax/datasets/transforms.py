@@ -11,12 +11,16 @@ box of side aabb_scale), which is Scene.bbox and Scene.world_bounds here.
 
 Two layouts load:
   <scene>/transforms.json                          a capture: frames sorted by file name,
-      every Config.llffhold-th a test view, Config.n_input_views training views evenly
-      spaced over the rest (the sparse split of ../shared/data/README.md; the other
-      frames stay in the Scene for the oracle of issue 34);
+      every Config.llffhold-th a test view, Config.n_input_views training views chosen
+      from the rest by Config.train_view_selection, Config.val_views validation views
+      (datasets/split.py; the other frames stay in the Scene for the oracle of issue 34);
+      a nerfstudio `ply_file_path` (SfM points in the json's frame) is read into
+      Scene.points, and its box (1st-99th percentiles) is the scene box where the file
+      has no aabb_scale;
   <scene>/transforms_train.json, transforms_test.json   NeRF-synthetic (Blender): the
-      n_input_views training views evenly spaced over train, every test view, in the
-      files' order (the order the published few-shot splits index).
+      n_input_views training views by Config.blender_split, every test_stride-th test
+      view, in the files' order (the order the published few-shot splits index), and
+      Config.val_views frames of transforms_val.json evenly spaced.
 RGBA images are composited on white when Config.white_bkgd, else on black (as the
 Blender loader does). Config.normalize_poses moves and scales the cameras as mip-NeRF
 360 places unbounded scenes (the focus point of the optical axes at the origin, the
@@ -33,7 +37,9 @@ import numpy as np
 from renerf_jax.datasets import images as image_io
 from renerf_jax.datasets import undistort
 from renerf_jax.datasets.blender import blender_split
-from renerf_jax.datasets.scene import Scene, fewshot_split
+from renerf_jax.datasets.points import points_box, read_points_ply
+from renerf_jax.datasets.scene import Scene
+from renerf_jax.datasets.split import evenly_spaced, split_of
 from renerf_jax.errors import DataError
 
 DISTORTION_KEYS = ('k1', 'k2', 'p1', 'p2')
@@ -179,13 +185,12 @@ def load_transforms(config) -> Scene:
   train_file = os.path.join(scene_dir, 'transforms_train.json')
   if os.path.isfile(single):
     paths, poses, cams = read_frames(single)
-    try:
-      train_idx, test_idx = fewshot_split(len(paths), config.n_input_views,
-                                          config.llffhold)
-    except DataError as e:
-      raise DataError(f'{single}: {e}') from None
+    train_idx, val_idx, test_idx = split_of(config, poses, single)
     meta_path = single
   elif os.path.isfile(train_file):
+    if config.train_view_selection != 'linspace':
+      raise DataError(f'{train_file}: Config.train_view_selection applies to captures; a '
+                      'Blender layout chooses its training frames by Config.blender_split')
     tr_paths, tr_poses, tr_cams = read_frames(train_file, sort=False)
     te_paths, te_poses, te_cams = read_frames(
         os.path.join(scene_dir, 'transforms_test.json'), sort=False)
@@ -195,6 +200,19 @@ def load_transforms(config) -> Scene:
     cams = [tr_cams[i] for i in pick] + [te_cams[i] for i in keep]
     train_idx = np.arange(len(pick))
     test_idx = np.arange(len(pick), len(paths))
+    val_idx = np.arange(len(paths), len(paths) + config.val_views)
+    if config.val_views:  # Evenly spaced frames of transforms_val.json.
+      val_file = os.path.join(scene_dir, 'transforms_val.json')
+      if not os.path.isfile(val_file):
+        raise DataError(f'Config.val_views={config.val_views} but {val_file} is missing')
+      va_paths, va_poses, va_cams = read_frames(val_file, sort=False)
+      if config.val_views > len(va_paths):
+        raise DataError(f'Config.val_views={config.val_views} but {val_file} has '
+                        f'{len(va_paths)} frames')
+      vpick = evenly_spaced(np.arange(len(va_paths)), config.val_views)
+      paths += [va_paths[i] for i in vpick]
+      poses = np.concatenate([poses, va_poses[vpick]], 0)
+      cams += [va_cams[i] for i in vpick]
     meta_path = train_file
   else:
     raise DataError(f'no transforms.json (or transforms_train.json) in {scene_dir}')
@@ -215,12 +233,19 @@ def load_transforms(config) -> Scene:
   meta = _read_json(meta_path)
   half = 1.5 * (_number(meta, 'aabb_scale', meta_path, 'top-level')
                 if 'aabb_scale' in meta else 1.)
-  return object_scene(config, config.scene, images, poses, fx, ((-half,) * 3, (half,) * 3),
-                      train_idx, test_idx, intrinsics=None if pinhole else intr)
+  box, xyz, rgb = ((-half,) * 3, (half,) * 3), None, None
+  if isinstance(meta.get('ply_file_path'), str):  # nerfstudio: SfM points, json's frame.
+    xyz, rgb = read_points_ply(os.path.join(scene_dir, meta['ply_file_path']))
+    if 'aabb_scale' not in meta:  # No box of its own: the points' box.
+      box = points_box(xyz)
+  return object_scene(config, config.scene, images, poses, fx, box, train_idx, test_idx,
+                      intrinsics=None if pinhole else intr, val_idx=val_idx, points=xyz,
+                      point_colors=rgb)
 
 
 def object_scene(config, name, images, poses, focal, box, train_idx, test_idx,
-                 intrinsics=None, depths=None) -> Scene:
+                 intrinsics=None, depths=None, val_idx=(), points=None,
+                 point_colors=None, point_views=None) -> Scene:
   """The Scene of a capture around an object (not forward-facing, no NDC).
 
   Args:
@@ -229,20 +254,28 @@ def object_scene(config, name, images, poses, focal, box, train_idx, test_idx,
     focal: pixels. box: ((lo x, y, z), (hi x, y, z)) holding the scene, world units.
     train_idx, test_idx: the split. intrinsics: (fx, fy, cx, cy, k1, k2, p1, p2) when
       not the centred pinhole of `focal`. depths: [N, H, W] true z-depths, or None.
+    val_idx: the validation views. points, point_colors, point_views: the SfM points
+      [P, 3] (world units), their colours [P, 3] in [0, 1] and [P, N] visibility, or None.
 
   Returns:
-    The Scene; with Config.normalize_poses the cameras, the box and the depths are moved
-    and scaled together (normalize_poses).
+    The Scene; with Config.normalize_poses the cameras, the box, the points and the
+    depths are moved and scaled together (normalize_poses).
   """
   box = np.array(box, np.float64)
   if config.normalize_poses:
     poses, centre, scale = normalize_poses(poses)
     box = (box - centre) * scale
     depths = None if depths is None else depths * scale
+    points = None if points is None else (np.asarray(points) - centre) * scale
   box = tuple(tuple(float(v) for v in b) for b in box)
   return Scene(name=name, images=images.astype(np.float32),
                poses=poses.astype(np.float32), focal=float(focal), near=config.near,
                far=config.far, use_ndc=False, white_bkgd=config.white_bkgd,
                train_idx=np.asarray(train_idx), test_idx=np.asarray(test_idx),
                depths=None if depths is None else depths.astype(np.float32),
-               forward_facing=False, bbox=box, world_bounds=box, intrinsics=intrinsics)
+               forward_facing=False, bbox=box, world_bounds=box, intrinsics=intrinsics,
+               val_idx=np.asarray(val_idx, np.int64),
+               points=None if points is None else np.asarray(points, np.float32),
+               point_colors=None if point_colors is None else np.asarray(point_colors,
+                                                                         np.float32),
+               point_views=point_views)

@@ -1,5 +1,6 @@
-"""The random start of a Gaussian scene without SfM points (3DGS on Blender): uniform in
-the scene's world box, or among the box's points that enough training cameras see.
+"""The start of a Gaussian scene: random (3DGS on Blender: uniform in the scene's world
+box, or among the box's points that enough training cameras see) or, with
+Config.gs_init = 'sfm', the capture's SfM points that the training views see.
 """
 import jax
 import numpy as np
@@ -71,8 +72,49 @@ def seen_points(key, n, lo, hi, scene, min_views, rounds=64):
                   f'by {min_views} or more training views; lower Config.gs_init_views')
 
 
+SFM_MIN_VIEWS = 2  # A point needs two training views to be triangulated from them.
+
+
+def sfm_start(scene, key, max_points):
+  """The SfM points of the training views: those 2 or more training views see.
+
+  From COLMAP's tracks where the scene has them (Scene.point_views), else by projection
+  into the training cameras (views_seeing beyond Scene.near). The capture's points were
+  triangulated from all its photos, so this start is kinder than an SfM run on the
+  training views alone.
+
+  Args:
+    scene: Scene with points. key: PRNG key of the subsample.
+    max_points: at most this many (a uniform subsample without replacement, seeded).
+
+  Returns:
+    (positions [n, 3] float32, colours [n, 3] float32 in [0, 1]); DataError where the
+    scene has no points or the training views see fewer than 2.
+  """
+  if scene.points is None:
+    raise DataError(f"scene {scene.name!r}: Config.gs_init='sfm' needs SfM points (a "
+                    "COLMAP model's points3D or a transforms.json ply_file_path)")
+  train = np.asarray(scene.train_idx)
+  if scene.point_views is not None:
+    counts = scene.point_views[:, train].sum(1)
+  else:
+    counts = views_seeing(scene.points, np.asarray(scene.poses)[train], scene.focal,
+                          scene.height, scene.width, scene.near)
+  keep = np.flatnonzero(counts >= SFM_MIN_VIEWS)
+  if len(keep) < 2:
+    raise DataError(f"scene {scene.name!r}: Config.gs_init='sfm': {len(keep)} of its "
+                    f'{len(scene.points)} SfM points are seen by {SFM_MIN_VIEWS} or more '
+                    'training views')
+  if len(keep) > max_points:
+    keep = np.sort(np.asarray(jax.random.choice(key, keep, (max_points,), replace=False)))
+  return (np.asarray(scene.points[keep], np.float32),
+          np.asarray(scene.point_colors[keep], np.float32))
+
+
 def init_gaussians(config, scene, key):
-  """config.gs_init_points random grey Gaussians in the scene's world box.
+  """config.gs_init_points Gaussians: from the SfM points (config.gs_init = 'sfm',
+  sfm_start, at most gs_init_points, at the points' colours), else random and grey in
+  the scene's world box.
 
   No SfM points: uniform in the box, or with config.gs_init_views = k >= 1 uniform
   among the box's points that k or more training cameras see (seen_points); then
@@ -80,6 +122,15 @@ def init_gaussians(config, scene, key):
   the points' spacing in the box without config.gs_init_knn; opacity
   config.gs_init_opacity) in a capacity of config.gs_capacity slots.
   """
+  if config.gs_init == 'sfm':  # At most gs_init_points of them, coloured.
+    pts, rgb = sfm_start(scene, key, config.gs_init_points)
+    n = len(pts)
+    means = np.zeros((config.gs_capacity, 3), np.float32)
+    means[:n] = pts
+    g = params_lib.init_at(means, n, params_lib.box_spacing(pts.min(0), pts.max(0), n),
+                           init_opacity=config.gs_init_opacity, knn=config.gs_init_knn)
+    dc = (rgb - 0.5) / params_lib.SH_C0  # Colour = SH_C0 * DC + 0.5 (3DGS's RGB2SH).
+    return g.replace(sh=g.sh.at[:n, 0].set(dc))
   lo, hi = world_box(scene)
   if config.gs_init_views == 0:
     return params_lib.random_init(key, config.gs_init_points, lo, hi,
