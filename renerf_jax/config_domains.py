@@ -166,6 +166,20 @@ def describe(annotation, domain: Optional[Domain]) -> str:
   return f'a tuple of {count} values, each {what}'
 
 
+def values_text(domain: Optional[Domain], kind=None) -> str:
+  """A domain in a few words for docs/configs.md: '>= 1', 'in [0, 1)', "'cone', 'cylinder'",
+  'any', 'non-empty', a Rule's text, 'True, False' (bool, domain None)."""
+  if domain is None:
+    return 'True, False' if kind is bool else '(none declared)'
+  if domain.choices:
+    return ', '.join(repr(c) for c in domain.choices)
+  if domain.text:
+    return 'any' if domain.text == 'text' else 'non-empty'
+  if domain.rule is not None:
+    return domain.rule.text
+  return _range_text(domain.intervals)
+
+
 def _element_problem(kind, domain: Optional[Domain], v) -> Optional[str]:
   """Why v is not a value of type kind in domain (a phrase after 'must be'), or None."""
   if kind is bool:

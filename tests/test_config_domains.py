@@ -5,6 +5,7 @@ outside each field's domain (wrong type, negative, zero, NaN, inf, huge, empty s
 unknown choice) and values inside it; train.main refuses one bad value per field with
 exit 2 and one line, writing no run directory."""
 import dataclasses
+import importlib.util
 import math
 import os
 import string
@@ -332,3 +333,21 @@ def test_train_py_refuses_a_mode_that_does_not_exist_yet(tmp_path):
   assert res.returncode == 2, res.stderr[-2000:]
   assert res.stderr == "error: Config.num_rounds='auto' must be an integer >= 0\n"
   assert res.stdout == '' and not run_dir.exists()
+
+
+def test_docs_list_every_fields_domain_as_declared():
+  """docs/configs.md's domain table is docs/make_configs.py's output (regenerate it with
+  python docs/make_configs.py), one row per field."""
+  spec = importlib.util.spec_from_file_location(
+      'make_configs', os.path.join(REPO, 'docs', 'make_configs.py'))
+  make_configs = importlib.util.module_from_spec(spec)
+  spec.loader.exec_module(make_configs)
+  with open(make_configs.PAGE, encoding='utf-8') as f:
+    text = f.read()
+  block = make_configs.generated()
+  assert make_configs.page_with(text, block) == text, (
+      'docs/configs.md is stale: run python docs/make_configs.py')
+  rows = [line for line in block.splitlines() if line.startswith('| `')]
+  assert [r.split('`')[1] for r in rows] == [f.name for f in FIELDS]
+  assert "| `num_rounds` | renerf | both | int | >= 0 |" in rows
+  assert "| `mask_threshold` | renerf | both | float | -1 or >= 0 |" in rows
