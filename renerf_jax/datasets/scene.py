@@ -136,7 +136,8 @@ def fewshot_split(n_images, n_input_views, llffhold=8):
   rest = np.array([i for i in all_idx if i not in set(test_idx.tolist())])
   if n_input_views > len(rest):
     raise DataError(f'Config.n_input_views={n_input_views} but only {len(rest)} '
-                    f'non-test images are available')
+                    f'non-test images are available of {n_images} (every '
+                    f'Config.llffhold={llffhold}-th is a test view)')
   pick = np.round(np.linspace(0, len(rest) - 1, n_input_views)).astype(int)
   return rest[pick], test_idx
 
