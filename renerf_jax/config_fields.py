@@ -149,7 +149,7 @@ def _canonical(value):
 def ignored_settings(config):
   """[(name, value)] of the fields `config.backbone` ignores that are set away from their
   defaults, in declaration order (empty for an unknown backbone: checked elsewhere)."""
-  if config.backbone not in BACKBONE_NAMES:
+  if not isinstance(config.backbone, str) or config.backbone not in BACKBONE_NAMES:
     return []
   fields = type(config).__dataclass_fields__
   names = ignored_by(type(config), config.backbone)

@@ -287,6 +287,17 @@ def test_every_field_accepts_values_inside_its_domain(data):
     assert got == value and type(got) is type(value), (f.name, value, got)
 
 
+def test_values_gin_cannot_write_are_refused_by_name_too():
+  """Config(...) from code: an unhashable list or an arbitrary object in any field is a
+  ConfigError naming it (not a TypeError from a comparison)."""
+  for f in FIELDS:
+    ctx = {'backbone': 'gaussians'} if f.metadata['backbone'] == 'gaussians' else {}
+    for value in (object(), [object()]):
+      with pytest.raises(ConfigError) as e:
+        Config(**ctx, **{f.name: value})
+      assert str(e.value).startswith(f'Config.{f.name}='), (f.name, str(e.value))
+
+
 def _one_bad_value(f):
   """A value outside field f's domain as a user might write it: below the range, an
   unknown choice, a word for a bool, a bare number for a tuple."""
