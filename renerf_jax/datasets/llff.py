@@ -19,6 +19,9 @@ def read_poses_bounds(path):
   """
   if not os.path.isfile(path):
     raise DataError(f'poses file not found: {path}')
+  with open(path, 'rb') as f:
+    if f.read(6) != b'\x93NUMPY':
+      raise DataError(f'{path} is not a .npy file (no NUMPY header)')
   try:
     arr = np.load(path)
   except Exception as e:  # pylint: disable=broad-except
