@@ -24,6 +24,7 @@ setup(
     ],
     extras_require={
         'test': ['pytest>=9', 'pytest-xdist>=3.8', 'pytest-timeout>=2.3', 'scikit-image>=0.26',
+                 'hypothesis>=6.150',  # tests/test_config_domains.py's property-based test
                  'nbclient>=0.11', 'nbformat>=5.11', 'ipykernel>=7',
                  'playwright>=1.65'],  # drives Debian's chromium in tests/test_viewer.py
     },

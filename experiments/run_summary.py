@@ -19,10 +19,10 @@ import imageio.v3 as iio
 import numpy as np
 
 from experiments import tables
-from renerf_jax import figures, report, rundir
-from renerf_jax.configs import load_config
+from renerf_jax import cli, figures, report, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.evaluation import view_name
+from renerf_jax.run_config import load_run_config
 
 
 def summarise(run_dir):
@@ -44,10 +44,8 @@ def summarise(run_dir):
   return row, [(c['train_seconds'], c['eval_psnr']) for c in curve]
 
 
-def photo_and_render(run_dir, data_dir):
-  """[H, 2W, 3] photo | render of the first test view."""
-  config = load_config([rundir.config_gin_path(run_dir)],
-                       [f"Config.data_dir = '{data_dir}'"], reset_ignored=True)
+def photo_and_render(run_dir, config):
+  """[H, 2W, 3] photo | render of the first test view (config: the run's Config)."""
   scene = load_scene(config)
   view = int(scene.test_idx[0])
   png = rundir.render_path(rundir.eval_dir(rundir.round_dir(run_dir, 0)), view_name(view))
@@ -55,6 +53,7 @@ def photo_and_render(run_dir, data_dir):
   return np.concatenate([np.asarray(scene.images[view], np.float32), render], axis=1)
 
 
+@cli.exit_on_error
 def main():
   p = argparse.ArgumentParser(description=__doc__,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -62,6 +61,10 @@ def main():
   p.add_argument('--data_dir', required=True, help='Config.data_dir for the photos')
   p.add_argument('--out', required=True, help='output prefix (.json, .md, .png, _renders.png)')
   args = p.parse_args()
+  # Every run's config first: a damaged config.gin / config.json (or the two disagreeing)
+  # is one line and exit 2 before anything is written.
+  configs = [load_run_config(run, [f"Config.data_dir = '{args.data_dir}'"])
+             for run in args.runs]
   rows, curves = [], {}
   for run in args.runs:
     row, curve = summarise(run)
@@ -91,7 +94,8 @@ def main():
   ax.set_ylabel('test PSNR [dB] (curve evaluations)')
   ax.legend()
   figures.save_figure(fig, args.out + '.png')
-  strips = [photo_and_render(run, args.data_dir)[::2, ::2] for run in args.runs]
+  strips = [photo_and_render(run, config)[::2, ::2]
+            for run, config in zip(args.runs, configs)]
   width = max(s.shape[1] for s in strips)
   strips = [np.pad(s, ((0, 4), (0, width - s.shape[1]), (0, 0)), constant_values=1.)
             for s in strips]

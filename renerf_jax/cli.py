@@ -7,7 +7,7 @@ import sys
 import traceback
 from typing import Optional, Sequence
 
-from renerf_jax import distributed, jit_cache, process_supervisor, report, rundir
+from renerf_jax import distributed, jit_cache, process_supervisor, report, run_config, rundir
 from renerf_jax.configs import config_differences, config_to_gin, fields_where, load_config
 from renerf_jax.errors import USER_ERRORS, RunDirError
 
@@ -112,9 +112,12 @@ def check_run_dir(config, run_dir, create):
   write = create and distributed.is_writer()
   current = report.to_jsonable(dataclasses.asdict(config))
   if os.path.isfile(path):
-    # A field added to Config after the run was made counts as its default value.
+    # A damaged config.json or config.gin is one line (run_config); a field added to
+    # Config after the run was made counts as its default value.
     saved = dict(report.to_jsonable(dataclasses.asdict(type(config)())),
-                 **report.read_json(path))
+                 **run_config.read_saved_config(run_dir))
+    if os.path.isfile(rundir.config_gin_path(run_dir)):
+      run_config.load_run_config(run_dir)
     diff = config_differences(config, saved, fields_where('resumable'))
     if diff:
       k = diff[0]

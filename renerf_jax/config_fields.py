@@ -8,7 +8,9 @@ metadata
             code (renerf_jax/gaussians is the Gaussians; the datasets, the pseudo-view
             poses, the round driver, evaluation and the run directory serve both);
   affects   what it can change (AFFECTS), read by every rule that decides what may be
-            shared or resumed (configs.fields_where).
+            shared or resumed (configs.fields_where);
+  domain    the values it may take (config_domains: the constructors' second argument,
+            e.g. nerf(4096, '>=1'); a bool field needs none), checked by config_checks.
 config_checks refuses a field that the chosen backbone ignores set away from its default;
 config_differences (comparing runs) skips such fields. Imports no module of the package
 that imports configs.
@@ -16,6 +18,7 @@ that imports configs.
 import dataclasses
 from typing import Dict, Tuple
 
+from renerf_jax.config_domains import parse_domain
 from renerf_jax.report import to_jsonable
 
 # What a Config field can change, declared once per field (its `affects` category):
@@ -53,11 +56,13 @@ BACKBONE_TAGS = ('nerf', 'gaussians', 'both')
 BACKBONE_NAMES = {'nerf': 'NeRF', 'gaussians': 'Gaussians'}
 
 
-def field(default, affects: str = 'model', backbone: str = 'both', group: str = 'shared'):
+def field(default, domain=None, affects: str = 'model', backbone: str = 'both',
+          group: str = 'shared'):
   """A Config field with its metadata.
 
   Args:
     default: the default value (immutable: Config is frozen and hashable).
+    domain: the values it may take (a spec of config_domains; None: a bool field).
     affects: what it can change (a key of AFFECTS).
     backbone: who reads it ('nerf', 'gaussians' or 'both').
     group: its concern (a key of GROUPS).
@@ -68,32 +73,49 @@ def field(default, affects: str = 'model', backbone: str = 'both', group: str = 
   assert affects in AFFECTS and backbone in BACKBONE_TAGS and group in GROUPS, (
       affects, backbone, group)
   return dataclasses.field(default=default, metadata={
-      'affects': affects, 'backbone': backbone, 'group': group})
+      'affects': affects, 'backbone': backbone, 'group': group,
+      'domain': parse_domain(domain)})
 
 
-def shared(default, affects='model', backbone='both'):
+def shared(default, domain=None, affects='model', backbone='both'):
   """A field of the data, the split, the seeds, the steps: both backbones read it."""
-  return field(default, affects, backbone, 'shared')
+  return field(default, domain, affects, backbone, 'shared')
 
 
-def nerf(default, affects='model'):
+def nerf(default, domain=None, affects='model'):
   """A field of the NeRF backbone (optimiser, sampling, field, regularisers, grid)."""
-  return field(default, affects, 'nerf', 'nerf')
+  return field(default, domain, affects, 'nerf', 'nerf')
 
 
-def gaussians(default, affects='model'):
+def gaussians(default, domain=None, affects='model'):
   """A field of the Gaussians backbone (renerf_jax/gaussians)."""
-  return field(default, affects, 'gaussians', 'gaussians')
+  return field(default, domain, affects, 'gaussians', 'gaussians')
 
 
-def renerf(default, affects='model', backbone='both'):
+def renerf(default, domain=None, affects='model', backbone='both'):
   """A field of the Re-Nerfing rounds: pseudo-views, D's training, masks."""
-  return field(default, affects, backbone, 'renerf')
+  return field(default, domain, affects, backbone, 'renerf')
 
 
-def report(default, affects='report', backbone='both'):
+def report(default, domain=None, affects='report', backbone='both'):
   """A field of evaluation, logging or checkpoints."""
-  return field(default, affects, backbone, 'report')
+  return field(default, domain, affects, backbone, 'report')
+
+
+def fields_with(cls, effect: str, present: bool = True) -> Tuple[str, ...]:
+  """Names of the fields of `cls` whose `affects` category has (or, present=False, lacks)
+  `effect`.
+
+  Args:
+    cls: a dataclass of such fields (configs.Config).
+    effect: 'baseline', 'pseudo', 'hessian', 'render' or 'resumable'.
+    present: select the fields with the effect (True) or without it (False).
+
+  Returns:
+    Field names in declaration order.
+  """
+  return tuple(f.name for f in dataclasses.fields(cls)
+               if (effect in AFFECTS[f.metadata.get('affects', 'model')]) == present)
 
 
 def field_backbone(cls, name: str) -> str:
@@ -127,7 +149,7 @@ def _canonical(value):
 def ignored_settings(config):
   """[(name, value)] of the fields `config.backbone` ignores that are set away from their
   defaults, in declaration order (empty for an unknown backbone: checked elsewhere)."""
-  if config.backbone not in BACKBONE_NAMES:
+  if not isinstance(config.backbone, str) or config.backbone not in BACKBONE_NAMES:
     return []
   fields = type(config).__dataclass_fields__
   names = ignored_by(type(config), config.backbone)

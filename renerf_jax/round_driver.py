@@ -21,7 +21,9 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 from flax import serialization
 
-from renerf_jax import backbones, distributed, figures, pseudo_views, renerf, report, rundir
+from renerf_jax import (backbones, checkpoint_io, distributed, figures, pseudo_views, renerf,
+                        report, rundir)
+from renerf_jax.errors import RunDirError
 from renerf_jax.evaluation import Evaluation
 from renerf_jax.pseudo_views import PseudoViews
 
@@ -96,8 +98,8 @@ def load_round_params(config, rdir, r):
   Returns:
     The parameter pytree of round r's backbone.
   """
-  with open(rundir.params_path(rdir), 'rb') as f:
-    return serialization.from_bytes(params_template(config, r), f.read())
+  return checkpoint_io.read_params(rundir.params_path(rdir), params_template(config, r),
+                                  f'round {r} in {rdir}')
 
 
 # ------------------------------------------------------------------ the round driver
@@ -157,7 +159,12 @@ def load_round(config, rdir, state: renerf.RoundState) -> renerf.RoundState:
   """The RoundState after the finished round in rdir (read-only)."""
   r = state.round_index + 1
   params = load_round_params(config, rdir, r)
-  result = report.read_json(rundir.result_path(rdir))
+  try:
+    result = report.read_json(rundir.result_path(rdir))
+  except (OSError, ValueError) as e:
+    raise RunDirError(f'{rundir.result_path(rdir)} is damaged ({type(e).__name__}): round '
+                      f'{r} is marked finished with it; move that round directory aside '
+                      'to train the round again') from None
   return renerf.RoundState(
       params=params, pseudo=load_pseudo_views(rundir.pseudo_views_dir(rdir)),
       round_index=r, metrics=state.metrics + (result['metrics'],),

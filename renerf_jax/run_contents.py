@@ -3,28 +3,20 @@ each round's parameters (finished, or the latest checkpoint of the round in trai
 its pseudo-views and its training log. Reads only; never writes into the run.
 """
 import dataclasses
-import os
 from typing import Optional
 
 from flax import serialization
 
 from renerf_jax import rundir
-from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
-from renerf_jax.errors import RunDirError
 from renerf_jax.round_driver import load_pseudo_views, load_round_params, params_template
+from renerf_jax.run_config import load_run_config
 
 
 def run_config(run_dir):
-  """The Config a run was made with (run_dir/config.gin, as train.py wrote it)."""
-  path = rundir.config_gin_path(run_dir)
-  if not os.path.isfile(rundir.config_json_path(run_dir)) or not os.path.isfile(path):
-    raise RunDirError(f'{run_dir} is not a run directory (config.json / config.gin '
-                      'missing); train first, e.g. python train.py '
-                      '--gin_configs=gin_configs/demo.gin')
-  # reset_ignored: a config.gin written before settings the backbone ignores were
-  # refused still loads (they change nothing of the run).
-  return load_config([path], reset_ignored=True)
+  """The Config a run was made with (run_dir/config.gin, as train.py wrote it, checked
+  against config.json: run_config.load_run_config; a damaged one is one RunDirError)."""
+  return load_run_config(run_dir)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,7 +54,7 @@ def load_params(config, run_dir, r):
 
   A checkpoint is a complete file or absent (rundir.save_checkpoint renames atomically),
   so reading while training writes is safe; one removed between listing and reading
-  (training keeps the last two) is retried once.
+  (training keeps the last two) is retried once, and a damaged one is passed over.
   """
   rdir = rundir.round_dir(run_dir, r)
   if rundir.is_done(rdir):
@@ -70,16 +62,17 @@ def load_params(config, run_dir, r):
   template = params_template(config, r)
   ckpt_dir = rundir.round_checkpoints_dir(run_dir, r)
   for _ in range(2):
-    ckpts = rundir.list_checkpoints(ckpt_dir)
-    if not ckpts:
+    for step, path in reversed(rundir.list_checkpoints(ckpt_dir)):
+      try:
+        with open(path, 'rb') as f:
+          raw = serialization.msgpack_restore(f.read())
+      except FileNotFoundError:
+        break  # Removed by training meanwhile: list again.
+      except Exception:  # pylint: disable=broad-except
+        continue  # Damaged: the one before it (training sets it aside on resuming).
+      return serialization.from_state_dict(template, raw['state']['params']), step
+    else:
       return None, None
-    step, path = ckpts[-1]
-    try:
-      with open(path, 'rb') as f:
-        raw = serialization.msgpack_restore(f.read())
-    except FileNotFoundError:
-      continue
-    return serialization.from_state_dict(template, raw['state']['params']), step
   return None, None
 
 

@@ -9,7 +9,8 @@ benchmarks and scripts derive paths with these functions:
     control/     control_dir: round 1's seed-matched control, a run directory of its own
     round_<r>/   round_dir: params.msgpack, result.json (params_path, result_path),
                  point_cloud.ply (Gaussians), copied_from.json (experiments), DONE
-      train/          train_dir: checkpoints/ (checkpoints_dir, checkpoint_path), log.jsonl
+      train/          train_dir: checkpoints/ (checkpoints_dir, checkpoint_path; a damaged
+                      one is renamed *.damaged: checkpoint_io), log.jsonl
       eval/           eval_dir (eval_extra/: eval.py): metrics.json/.md, renders
       pseudo_views/   pseudo_views_dir (r >= 1): views.npz, views.json, timing.json, PNGs
 
@@ -27,7 +28,7 @@ import time
 import numpy as np
 from flax import serialization
 
-from renerf_jax import distributed, report
+from renerf_jax import checkpoint_io, distributed, report
 
 # ------------------------------------------------------------------- the run's layout
 
@@ -256,12 +257,9 @@ def list_checkpoints(directory):
 
 
 def restore_checkpoint(directory, template):
-  """The latest checkpoint restored into `template`'s structure, or None."""
-  ckpts = list_checkpoints(directory)
-  if not ckpts:
-    return None
-  with open(ckpts[-1][1], 'rb') as f:
-    return serialization.from_bytes(template, f.read())
+  """The newest checkpoint that decodes, restored into `template`'s structure, or None
+  (checkpoint_io.restore_newest: a damaged one is renamed *.damaged with a warning)."""
+  return checkpoint_io.restore_newest(list_checkpoints(directory), template)
 
 
 def resume_training(out_dir, state):

@@ -135,6 +135,30 @@ def test_train_model_resumes_from_a_mid_run_checkpoint(tmp_path, monkeypatch):
                          resumed.state.opt_state)
 
 
+
+def test_train_model_resumes_before_a_damaged_checkpoint(tmp_path, capsys, monkeypatch):
+  """A finished run whose last checkpoint (step 20) was cut short: the rerun sets it aside
+  (one warning line), restores step 15, trains steps 15..19 once more and ends where the
+  uninterrupted run ended, bit for bit (tests/test_damaged_runs.py: the other cases)."""
+  config, scene, pools = _setup(max_steps=20, checkpoint_every=5, eval_every=0)
+  full = training.train_model(config, scene, str(tmp_path / 'a'), pools, show_progress=False)
+  ckpt_dir = rundir.checkpoints_dir(str(tmp_path / 'a'))
+  assert [s for s, _ in rundir.list_checkpoints(ckpt_dir)] == [15, 20]
+  path = rundir.checkpoint_path(ckpt_dir, 20)
+  with open(path, 'r+b') as f:
+    f.truncate(1000)
+  capsys.readouterr()
+  real_step, calls = training.train_step, []
+  monkeypatch.setattr(training, 'train_step',
+                      lambda *a, **k: calls.append(int(a[3].step)) or real_step(*a, **k))
+  resumed = training.train_model(config, scene, str(tmp_path / 'a'), pools,
+                                 show_progress=False)
+  assert calls == list(range(15, 20)) and int(resumed.state.step) == 20
+  assert capsys.readouterr().err.startswith(f'warning: {path} is damaged (')
+  jax.tree_util.tree_map(np.testing.assert_array_equal, full.state.params,
+                         resumed.state.params)
+  assert [s for s, _ in rundir.list_checkpoints(ckpt_dir)] == [15, 20]
+
 _SHARD_SCRIPT = r'''
 import jax, numpy as np
 from conftest import tiny_config

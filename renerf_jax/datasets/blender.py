@@ -11,7 +11,12 @@ from renerf_jax.errors import DataError
 
 
 def read_split(scene_dir, split):
-  """Reads one split's frames. Returns (image paths, c2w [N, 3, 4], camera_angle_x)."""
+  """Reads one split's frames. Returns (image paths, c2w [N, 3, 4], camera_angle_x).
+
+  Every problem is one DataError line naming the file: unreadable JSON, no frames, a
+  frame without a file_path, a duplicate one, a missing image, a transform_matrix that
+  is not a finite 4x4 matrix, a camera_angle_x that is not an angle in (0, pi).
+  """
   path = os.path.join(scene_dir, f'transforms_{split}.json')
   if not os.path.isfile(path):
     raise DataError(f'camera file not found: {path}')
@@ -20,18 +25,30 @@ def read_split(scene_dir, split):
       meta = json.load(f)
     angle = float(meta['camera_angle_x'])
     frames = meta['frames']
-  except (json.JSONDecodeError, KeyError, TypeError, ValueError) as e:
+  except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as e:
     raise DataError(f'malformed {path}: {type(e).__name__}: {e}') from None
+  if not 0. < angle < np.pi:
+    raise DataError(f'{path}: camera_angle_x={angle} is not an angle in (0, pi)')
+  if not isinstance(frames, list) or not frames:
+    raise DataError(f'{path}: "frames" is not a non-empty list')
   paths, poses = [], []
-  for frame in frames:
-    img = os.path.join(scene_dir, frame['file_path'])
+  for i, frame in enumerate(frames):
+    if not isinstance(frame, dict) or not isinstance(frame.get('file_path'), str):
+      raise DataError(f'{path}: frame {i} has no "file_path" string')
+    img = os.path.normpath(os.path.join(scene_dir, frame['file_path']))
     if not os.path.splitext(img)[1]:
       img += '.png'
+    if img in paths:
+      raise DataError(f'{path}: frame {i} repeats file_path {frame["file_path"]!r}')
     if not os.path.isfile(img):
       raise DataError(f'{path}: frame file missing: {img}')
-    c2w = np.asarray(frame['transform_matrix'], np.float64)
+    try:
+      c2w = np.asarray(frame.get('transform_matrix'), np.float64)
+    except (TypeError, ValueError):
+      c2w = np.zeros(0)
     if c2w.shape != (4, 4) or not np.all(np.isfinite(c2w)):
-      raise DataError(f'{path}: bad transform_matrix for {frame["file_path"]}')
+      raise DataError(f'{path}: bad transform_matrix for {frame["file_path"]} (not a '
+                      'finite 4x4 matrix)')
     paths.append(img)
     poses.append(c2w[:3, :4])
   return paths, np.stack(poses), angle

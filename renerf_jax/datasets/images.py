@@ -22,11 +22,16 @@ def list_images(folder):
 def read_image(path, keep_alpha=False):
   """Reads an 8/16-bit image as float32 in [0, 1], shape [H, W, 3] (or 4 with keep_alpha).
 
-  Grayscale images are replicated to 3 channels; an alpha channel is dropped unless
-  keep_alpha (then a missing alpha is filled with 1).
+  Greyscale photos (and greyscale + alpha) are converted on purpose, not refused: the grey
+  is replicated to 3 channels; an alpha channel is dropped unless keep_alpha (then a
+  missing alpha is filled with 1), so one folder may mix greyscale, RGB and RGBA files.
+  A missing, empty, truncated or undecodable file, or non-finite pixels, is a DataError
+  naming the file.
   """
   if not os.path.isfile(path):
     raise DataError(f'image file not found: {path}')
+  if os.path.getsize(path) == 0:
+    raise DataError(f'image file is empty (0 bytes): {path}')
   try:
     img = np.asarray(iio.imread(path))
   except Exception as e:  # pylint: disable=broad-except
@@ -45,12 +50,12 @@ def read_image(path, keep_alpha=False):
   if img.shape[-1] in (1, 2):  # Gray or gray + alpha.
     gray = np.repeat(img[..., :1], 3, axis=-1)
     img = np.concatenate([gray, img[..., 1:]], -1) if img.shape[-1] == 2 else gray
+  if not np.all(np.isfinite(img)):
+    raise DataError(f'non-finite pixel values in {path}')
   if keep_alpha:
     if img.shape[-1] == 3:
       img = np.concatenate([img, np.ones_like(img[..., :1])], -1)
     return img
-  if not np.all(np.isfinite(img)):
-    raise DataError(f'non-finite pixel values in {path}')
   return img[..., :3]
 
 

@@ -20,10 +20,16 @@ def read_poses_bounds(path):
   """
   if not os.path.isfile(path):
     raise DataError(f'poses file not found: {path}')
+  with open(path, 'rb') as f:
+    if f.read(6) != b'\x93NUMPY':
+      raise DataError(f'{path} is not a .npy file (no NUMPY header)')
   try:
     arr = np.load(path)
   except Exception as e:  # pylint: disable=broad-except
-    raise DataError(f'cannot read {path}: {type(e).__name__}') from None
+    first = str(e).strip().splitlines()[0] if str(e).strip() else 'not a .npy array'
+    raise DataError(f'cannot read {path}: {type(e).__name__}: {first}') from None
+  if not isinstance(arr, np.ndarray) or arr.dtype.kind not in 'fiu':
+    raise DataError(f'{path} holds no numeric array, expected [N, 17] numbers')
   if arr.ndim != 2 or arr.shape[1] != 17:
     raise DataError(f'{path} has shape {arr.shape}, expected [N, 17] (3x5 pose + 2 bounds)')
   if not np.all(np.isfinite(arr)):
@@ -32,7 +38,8 @@ def read_poses_bounds(path):
   poses = arr[:, :15].reshape(-1, 3, 5).astype(np.float64)
   bounds = arr[:, 15:].astype(np.float64)
   if np.any(bounds <= 0):
-    raise DataError(f'{path} has non-positive depth bounds')
+    raise DataError(f'{path} has non-positive depth bounds (first in row '
+                    f'{int(np.argwhere(bounds <= 0)[0, 0])})')
   return poses, bounds
 
 

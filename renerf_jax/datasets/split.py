@@ -93,7 +93,8 @@ def split_views(poses, n_input_views, llffhold=8, selection='linspace', val_view
   rest = np.setdiff1d(np.arange(n, dtype=np.int64), test)
   if n_input_views > len(rest):
     raise DataError(f'Config.n_input_views={n_input_views} but only {len(rest)} '
-                    f'non-test images are available')
+                    f'non-test images are available of {n} (every '
+                    f'Config.llffhold={llffhold}-th is a test view)')
   if selection == 'coverage':
     train = coverage_views(poses, rest, n_input_views)
   elif selection == 'linspace':

@@ -120,6 +120,8 @@ def read_frames(path, sort=True):
     img = os.path.normpath(os.path.join(scene_dir, frame['file_path']))
     if not os.path.splitext(img)[1]:
       img += '.png'  # NeRF-synthetic names frames without their extension.
+    if any(r[1] == img for r in rows):
+      raise DataError(f'{path}: frame {i} repeats file_path {frame["file_path"]!r}')
     if not os.path.isfile(img):
       raise DataError(f'{path}: image of frame {frame["file_path"]!r} not found: {img}')
     try:

@@ -9,6 +9,7 @@ normalised), so the files open in the usual 3DGS viewers. numpy only.
 import numpy as np
 
 from renerf_jax import report
+from renerf_jax.errors import DataError
 from renerf_jax.gaussians import params as params_lib
 
 NUM_REST = 3 * (params_lib.NUM_SH - 1)  # 45 higher-order SH coefficients.
@@ -66,29 +67,42 @@ def read_ply(path, capacity=None):
     params.Gaussians (numpy arrays).
 
   Raises:
-    ValueError: the file is not of this layout.
+    DataError (a ValueError): one line naming the file: not a ply file, not this layout
+      (e.g. a point cloud without the colours f_dc_0..2: the properties it lacks are
+      named), vertex data of the wrong length, NaN or inf values (the first vertex
+      named), more vertices than capacity.
   """
-  with open(path, 'rb') as f:
-    data = f.read()
+  try:
+    with open(path, 'rb') as f:
+      data = f.read()
+  except OSError as e:
+    raise DataError(f'cannot read {path}: {type(e).__name__}: {e.strerror}') from None
   end = data.find(b'end_header\n')
   if not data.startswith(b'ply\n') or end < 0:
-    raise ValueError(f'{path}: not a ply file')
+    raise DataError(f'{path}: not a ply file')
   header = data[:end + len(b'end_header\n')]
-  lines = header.decode('ascii').splitlines()
+  lines = header.decode('ascii', 'replace').splitlines()
   try:
     n = int(lines[2].split()[2])
   except (IndexError, ValueError):
-    raise ValueError(f'{path}: no vertex count in the header') from None
+    raise DataError(f'{path}: no vertex count in the header') from None
   if header != ply_header(n):
-    raise ValueError(f'{path}: not the binary little-endian 3DGS layout')
+    names = [line.split()[-1] for line in lines if line.startswith('property ')]
+    lacks = [p for p in PROPERTIES if p not in names]
+    raise DataError(f'{path}: not the binary little-endian 3DGS layout'
+                    + (f' (no {", ".join(lacks[:4])}{", ..." if len(lacks) > 4 else ""})'
+                       if lacks else ''))
   body = data[len(header):]
   width = len(PROPERTIES)
   if len(body) != 4 * n * width:
-    raise ValueError(f'{path}: {len(body)} bytes of vertex data for {n} vertices')
+    raise DataError(f'{path}: {len(body)} bytes of vertex data for {n} vertices')
   rows = np.frombuffer(body, '<f4').reshape(n, width).astype(np.float32)
+  if not np.all(np.isfinite(rows)):
+    bad = np.argwhere(~np.isfinite(rows))[0]
+    raise DataError(f'{path}: vertex {bad[0]} has a NaN or inf {PROPERTIES[bad[1]]}')
   capacity = n if capacity is None else capacity
   if capacity < n:
-    raise ValueError(f'{path}: {n} Gaussians do not fit in capacity {capacity}')
+    raise DataError(f'{path}: {n} Gaussians do not fit in capacity {capacity}')
   sh = np.concatenate([rows[:, 6:9, None],
                        rows[:, 9:9 + NUM_REST].reshape(n, 3, 15)], axis=2)
   sh = np.transpose(sh, (0, 2, 1))  # [n, 16, 3]
