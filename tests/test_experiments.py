@@ -541,6 +541,39 @@ def test_seed_spread_reports_each_rows_spread_and_the_views_that_spread(tmp_path
                       str(tmp_path / 'x')])
 
 
+def test_seed_spread_compares_two_spreads_with_an_f_test(tmp_path):
+  """--f_test: the PSNRs of one or more rows pooled per group, both stds and the
+  two-sided F-test's p (issue 62: a spread claim needs a variance test)."""
+  import scipy.stats  # pylint: disable=g-import-not-at-top
+  from experiments import seed_spread  # pylint: disable=g-import-not-at-top
+  from renerf_jax import report  # pylint: disable=g-import-not-at-top
+  m = lambda p: {'psnr': p, 'ssim': 0.5, 'lpips_alex': 0.2}
+  wide = [20., 22., 21., 23., 19.]
+  narrow = [21., 21.2, 20.9, 21.1]
+  report.write_json(str(tmp_path / 'a.json'), {'rows': {'lego': {
+      'B': {str(i): m(v) for i, v in enumerate(wide[:3])},
+      'C': {str(i): m(v) for i, v in enumerate(wide[3:])}}}})
+  report.write_json(str(tmp_path / 'b.json'), {'rows': {'lego': {
+      'B': {str(i): m(v) for i, v in enumerate(narrow)}}}})
+  a, b = tmp_path / 'a.json', tmp_path / 'b.json'
+  seed_spread.main(['--tables', str(a), str(b), '--f_test', f'wide={a}:lego:B;{a}:lego:C',
+                    f'narrow={b}:lego:B', '--out', str(tmp_path / 's')])
+  [t] = json.loads((tmp_path / 's.json').read_text())['f_tests']
+  ratio = np.var(wide, ddof=1) / np.var(narrow, ddof=1)
+  assert (t['n_a'], t['n_b']) == (5, 4) and t['ratio'] == pytest.approx(ratio)
+  assert t['p'] == pytest.approx(2 * scipy.stats.f.sf(ratio, 4, 3), rel=1e-9)
+  assert t['shown'] == (t['p'] < 0.05)
+  md = (tmp_path / 's.md').read_text()
+  assert f"| wide | 5 | {np.std(wide, ddof=1):.2f} | narrow | 4 | " in md
+  assert_table_cells(md)
+  with pytest.raises(SystemExit, match="has no row 'X'"):
+    seed_spread.main(['--tables', str(a), '--f_test', f'x={a}:lego:X', f'y={a}:lego:B',
+                      '--out', str(tmp_path / 'x')])
+  with pytest.raises(SystemExit, match='not LABEL=TABLE:SCENE:ROW'):
+    seed_spread.main(['--tables', str(a), '--f_test', 'x', f'y={a}:lego:B', '--out',
+                      str(tmp_path / 'x')])
+
+
 def test_compare_tables_pairs_rows_of_two_tables_by_scene_and_seed(tmp_path):
   """experiments/compare_tables.py: row of one table minus a row of another, paired by
   (scene, seed) over the common ones; a file that is no table is one clear error."""
