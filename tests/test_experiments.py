@@ -411,7 +411,8 @@ def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_ba
   assert (got['mean'], got['std'], got['wins']) == pytest.approx(
       (-0.1, np.std([0.3, -0.5], ddof=1), 1))
   assert s2['mean']['B 2x steps']['pooled_2x'] == {}
-  assert '| -0.10 +- 0.57 (1/2), p 0.84, Holm 0.84, [' in renerf_scenes.markdown(s2, ['fern'], 'cmd')
+  assert '| -0.10 +- 0.57 (1/2), p 0.84, Holm 0.84, [' in renerf_scenes.markdown(s2, ['fern'],
+                                                                              'cmd')
   gs = renerf_scenes.markdown(summary, ['fern'], 'cmd', backbone='gaussians')
   assert_table_cells(gs)
   assert_table_cells(renerf_scenes.markdown(s2, ['fern'], 'cmd'))
