@@ -2,8 +2,10 @@
 
 For rows that no single table holds: e.g. B with DropGaussian (one config) against B
 without it (another config), the same scenes and seeds. Per metric and per scene:
-mean +- std of row - reference, wins, the paired t-test's p and the bootstrap 95%
-interval (experiments/paired.py); pooled over every common (scene, seed) too.
+mean +- std of row - reference, wins, the paired t-test's p, its Holm adjustment over
+the table's rows (the scenes, and the pooled row when there are several scenes) and the
+bootstrap 95% interval (experiments/paired.py); pooled over every common (scene, seed)
+too. A gain is shown where the interval excludes 0 and the Holm p < 0.05.
 
   python -m experiments.compare_tables --a runs_drop.json --a_row B --a_label "3DGS + dropout" \
       --b runs_plain.json --b_row B --b_label 3DGS --out .../dropout_vs_plain
@@ -49,9 +51,16 @@ def compare(rows_a, row_a, rows_b, row_b):
   if not keys:
     raise ValueError(f'no (scene, seed) has both row {row_a!r} and row {row_b!r}')
   pooled = [p for pairs in by_scene.values() for p in pairs]
+  scenes = {sc: renerf_scenes.pair_stats(pairs) for sc, pairs in by_scene.items()}
+  # One family per metric: the scenes' rows and, over several scenes, the pooled row (over
+  # one scene the pooled row is that scene's comparison again: the same test, counted once).
+  pooled_stats = renerf_scenes.pair_stats(pooled)
+  renerf_scenes.holm(list(scenes.values()) + ([pooled_stats] if len(scenes) > 1 else []))
+  if len(scenes) == 1:
+    pooled_stats = {k: dict(v) for k, v in next(iter(scenes.values())).items()}
   return {'pairs': keys,
-          'scenes': {sc: renerf_scenes.pair_stats(pairs) for sc, pairs in by_scene.items()},
-          'pooled': renerf_scenes.pair_stats(pooled),
+          'scenes': scenes,
+          'pooled': pooled_stats,
           'means': {side: {m: sum(p[i][m] for p in pooled) / len(pooled)
                            for m in renerf_scenes.METRICS}
                     for i, side in enumerate(('a', 'b'))}}
@@ -65,7 +74,9 @@ def markdown(result, label_a, label_b, command):
           + f', {label_b} '
           + ' / '.join(f'{result["means"]["b"][m]:.3f}' for m in renerf_scenes.METRICS)
           + ' (PSNR / SSIM / LPIPS-alex). Cells: mean +- std (wins/pairs), paired '
-          't-test p, bootstrap 95% interval; bold where a gain is shown.\n\n'
+          't-test p, its Holm adjustment over the rows of the column (the pooled row '
+          'counted where there are several scenes), bootstrap 95% interval; bold where a '
+          'gain is shown (the interval excludes 0 and the Holm p < 0.05).\n\n'
           '| scene | dPSNR | dSSIM | dLPIPS-alex |\n|---|---|---|---|\n')
   line = lambda name, s: (f'| {name} | ' + ' | '.join(
       paired.format_cell(s[m], 3 if m != 'psnr' else 2) for m in renerf_scenes.METRICS)

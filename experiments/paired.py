@@ -9,6 +9,13 @@ the t-test agrees (p < 0.05): with few pairs the percentile interval is too narr
 positive deltas exclude 0 from every resample, whatever their spread), so it alone would
 call 1.58, 0.70, 0.11, 0.10, 0.23 dB a gain although p = 0.13.
 
+A table compares many rows, so its p-values are Holm-adjusted over each family of
+comparisons it makes (issue 62; holm_adjust, adjust_family): the rows compared with one
+reference in one metric of one table. Then "shown" = the (unadjusted) interval excludes
+0 and the Holm p < 0.05; a lone comparison is a family of one (Holm p = p). Intervals stay
+unadjusted. A claim about spread (one config's runs agree better than another's) is a
+two-sided F-test of the two variances (f_test).
+
 Pure numpy, no scipy: Student's t tail is the regularised incomplete beta function,
 evaluated with Lentz's continued fraction.
 """
@@ -72,6 +79,88 @@ def t_two_sided_p(t: float, df: float) -> float:
   return betainc(0.5 * df, 0.5, df / (df + t * t))
 
 
+def f_cdf(x: float, d1: float, d2: float) -> float:
+  """P(F <= x) for Fisher's F with (d1, d2) degrees of freedom."""
+  if not (d1 > 0 and d2 > 0):
+    raise ValueError(f'f_cdf needs d1, d2 > 0 (got {d1}, {d2})')
+  if x <= 0.:
+    return 0.
+  if math.isinf(x):
+    return 1.
+  return betainc(0.5 * d1, 0.5 * d2, d1 * x / (d1 * x + d2))
+
+
+def f_test(a, b) -> dict:
+  """Two-sided F-test of equal variances of two independent samples (e.g. one config's
+  runs over seeds against another's): is one spread shown to be smaller?
+
+  Args:
+    a, b: the two samples (at least 2 values each).
+
+  Returns:
+    {'std_a', 'std_b' (ddof 1), 'n_a', 'n_b', 'ratio' (var a / var b), 'p' (two-sided:
+    2 min(P(F <= ratio), P(F >= ratio)), capped at 1), 'shown' (p < ALPHA)}.
+  """
+  a, b = (np.asarray(v, np.float64) for v in (a, b))
+  if a.ndim != 1 or b.ndim != 1 or a.size < 2 or b.size < 2:
+    raise ValueError(f'f_test needs two lists of at least 2 values (got {a.size}, {b.size})')
+  va, vb = float(a.var(ddof=1)), float(b.var(ddof=1))
+  if va == vb == 0.:
+    ratio, p = 1., 1.
+  else:
+    ratio = va / vb if vb > 0. else math.inf
+    cdf = f_cdf(ratio, a.size - 1, b.size - 1)
+    p = min(1., 2. * min(cdf, 1. - cdf))
+  return {'std_a': math.sqrt(va), 'std_b': math.sqrt(vb), 'n_a': int(a.size),
+          'n_b': int(b.size), 'ratio': ratio, 'p': p, 'shown': bool(p < ALPHA)}
+
+
+def holm_adjust(pvalues):
+  """Holm's step-down adjustment of a family of p-values (None entries are skipped).
+
+  The k-th smallest of the m p-values becomes max over j <= k of min(1, (m - j + 1) p_(j)):
+  rejecting where the adjusted p < alpha keeps the chance of any false rejection in the
+  family below alpha, whatever the dependence between the tests.
+
+  Returns:
+    The adjusted p-values in the order given (None where the input is None).
+  """
+  idx = [i for i, p in enumerate(pvalues) if p is not None]
+  m = len(idx)
+  out = [None] * len(pvalues)
+  running = 0.
+  for rank, i in enumerate(sorted(idx, key=lambda i: pvalues[i])):
+    running = max(running, min(1., (m - rank) * float(pvalues[i])))
+    out[i] = running
+  return out
+
+
+def adjust_family(summaries, better: float = 1.):
+  """Holm-adjusts the p-values of one family of paired_summary results in place: each
+  gets 'p_holm' and 'family' (m, the comparisons with a p-value), and its 'shown' /
+  'loss_shown' are decided on p_holm. Summaries without a p-value (one pair) are left
+  as they are.
+
+  Args:
+    summaries: the paired_summary dicts of the family (e.g. every row against B in PSNR).
+    better: as in paired_summary.
+  """
+  summaries = [s for s in summaries if s and s.get('p') is not None]
+  for s, p_holm in zip(summaries, holm_adjust([s['p'] for s in summaries])):
+    s['p_holm'], s['family'] = p_holm, len(summaries)
+    _decide(s, p_holm, better)
+  return summaries
+
+
+def _decide(s, p, better):
+  """'shown' / 'loss_shown' of a summary with an interval, at p-value p."""
+  lo, hi = s['ci']
+  above, below = lo > 0., hi < 0.  # the interval excludes 0 on one side
+  significant = p < ALPHA
+  s['shown'] = bool(significant and (above if better > 0 else below))
+  s['loss_shown'] = bool(significant and (below if better > 0 else above))
+
+
 def bootstrap_interval(deltas, level=0.95, resamples=BOOT_RESAMPLES, seed=BOOT_SEED):
   """Percentile interval of the mean of `deltas` over paired bootstrap resamples.
 
@@ -101,7 +190,8 @@ def paired_summary(deltas, better: float = 1.) -> dict:
     'n', 'p' (two-sided paired t-test; None for fewer than 2 pairs), 'ci' ([low, high]
     bootstrap 95% interval of the mean; None for fewer than 2 pairs), 'shown' (a gain
     is shown: the interval excludes 0 on the better side and p < ALPHA), 'loss_shown'
-    (the same on the worse side)}.
+    (the same on the worse side)}. In a table, adjust_family then replaces p by its Holm
+    adjustment in that rule ('p_holm', 'family').
   """
   d = np.asarray(deltas, np.float64)
   if d.ndim != 1 or d.size == 0:
@@ -119,21 +209,19 @@ def paired_summary(deltas, better: float = 1.) -> dict:
     p = 1. if mean == 0. else 0.
   else:
     p = t_two_sided_p(mean / (std / math.sqrt(n)), n - 1)
-  lo, hi = bootstrap_interval(d)
-  above, below = lo > 0., hi < 0.  # the interval excludes 0 on one side
-  significant = p < ALPHA
-  out.update(p=p, ci=[lo, hi],
-             shown=bool(significant and (above if better > 0 else below)),
-             loss_shown=bool(significant and (below if better > 0 else above)))
+  out.update(p=p, ci=list(bootstrap_interval(d)))
+  _decide(out, p, better)
   return out
 
 
 def format_cell(s: dict, digits: int = 2) -> str:
-  """'+0.80 +- 0.74 (3/3), p 0.21, [-0.05, +1.50]'; bold when a gain is shown."""
+  """'+0.80 +- 0.74 (3/3), p 0.21, Holm 0.42, [-0.05, +1.50]'; bold when a gain is shown
+  (the Holm p is given where the summary was adjusted in a family)."""
   if not s:
     return ''
   text = f"{s['mean']:+.{digits}f} +- {s['std']:.{digits}f} ({s['wins']}/{s['n']})"
   if s['p'] is not None:
     lo, hi = s['ci']
-    text += f", p {s['p']:.2g}, [{lo:+.{digits}f}, {hi:+.{digits}f}]"
+    holm = f", Holm {s['p_holm']:.2g}" if s.get('p_holm') is not None else ''
+    text += f", p {s['p']:.2g}{holm}, [{lo:+.{digits}f}, {hi:+.{digits}f}]"
   return f'**{text}**' if s['shown'] else text

@@ -6,9 +6,10 @@ control; --scenes_2x limits it to some scenes), and the seed-matched controls of
 (--no_controls skips them): B's training at D's seed (Config.d_seed, renerf.round_config)
 at B's steps ("D's seed, no pseudo-views": it differs from R1 in the pseudo-views
 alone) and at 2x B's steps. Every row is paired with B, with both controls, with B 2x and
-with R1: mean +- std, wins, a paired t-test p-value and a paired bootstrap 95% interval
+with R1: mean +- std, wins, a paired t-test p-value, its Holm adjustment over the rows
+compared with the same reference in the table, and a paired bootstrap 95% interval
 (experiments/paired.py); a gain is shown (bold) only when the interval excludes 0 and
-p < 0.05. With --rounds_scenes, those scenes also
+the Holm p < 0.05. With --rounds_scenes, those scenes also
 get R2, R3 and B trained for the rounds' total time. Extra rows (--variant
 'LABEL=bindings', e.g. R1 with the masks or an attribution of K, the mix or the factors)
 train R1 from the same B (copied bit for bit).
@@ -41,9 +42,14 @@ which reads their .json rows and trains nothing
     experiments/results/renerf_r1_converged_llff/scenes_conv3_{fern,orchids,room,trex,fortress}.json
 
 Writes <out>/<name>.json, <name>.md and <name>.png (paired deltas per scene; --table
-names them otherwise).
+names them otherwise). --refresh recomputes the statistics and the markdown of finished
+tables from their rows (e.g. after the statistics changed), keeping their recorded
+commands; it trains nothing and leaves their .png as it is:
+
+  python -m experiments.renerf_scenes --name refresh --refresh experiments/results/*/lego.json
 """
 import argparse
+import copy
 import dataclasses
 import os
 import shlex
@@ -127,6 +133,9 @@ def parser():
   p.add_argument('--table', default=None,
                  help='name of the written table files (default --name): tabulate a subset '
                       'of the runs under <out>/<name> without overwriting the full table')
+  p.add_argument('--refresh', nargs='+', default=None, metavar='JSON',
+                 help='rewrite finished tables (.json summary and .md) from their own rows '
+                      'with the current statistics, keeping their commands; trains nothing')
   p.add_argument('--merge', nargs='+', default=None, metavar='JSON',
                  help='build the table from the rows of finished tables (their .json, e.g. '
                       'one per scene) instead of running: all must come from the same '
@@ -290,6 +299,8 @@ def summarize(all_rows, scenes, seeds):
         if label != ref and ref in rows and not (key == 'paired_R1' and label == 'B'):
           entry[key] = pair_stats(pairs_of(all_rows, [sc], seeds, label, ref))
       res[label] = entry
+    for key, _, _ in REFERENCES:  # Holm over the rows compared with one reference
+      holm(res[label].get(key, {}) for label in res)
     res['paper_R1_delta'] = paper_delta(sc)
     out['scenes'][sc] = res
   for label in labels:
@@ -305,10 +316,26 @@ def summarize(all_rows, scenes, seeds):
       entry['pooled' + key[len('paired'):]] = (
           pair_stats(pairs_of(all_rows, scenes, seeds, label, ref)) if label != ref else {})
     out['mean'][label] = entry
+  for key, _, _ in REFERENCES:
+    pooled = 'pooled' + key[len('paired'):]
+    if len(scenes) == 1:  # The pooled table repeats the scene's tests: the same Holm p.
+      for label, e in out['mean'].items():
+        e[pooled] = copy.deepcopy(out['scenes'][scenes[0]].get(label, {}).get(key, {}))
+    else:
+      holm(e[pooled] for e in out['mean'].values())
   paper = [paper_delta(sc) for sc in scenes if paper_delta(sc)]
   out['paper_R1_delta_mean'] = {k: round(float(np.mean([p[k] for p in paper])), 3)
                                 for k in METRICS} if paper else None
   return out
+
+
+def holm(cells):
+  """Holm-adjusts one family of comparisons in place (paired.adjust_family), per metric:
+  cells are pair_stats results {metric: paired_summary} of the rows of one table compared
+  with one reference (one column of a scene's table or of the pooled table)."""
+  cells = list(cells)
+  for k in METRICS:
+    paired.adjust_family([c[k] for c in cells if k in c], BETTER[k])
 
 
 def fmt_pair(p, k, d=2):
@@ -377,9 +404,12 @@ def markdown(summary, scenes, command, sources=(), backbone='nerf'):
         'for scale only.' if summary['paper_R1_delta_mean'] else '')]
   lines += ['', 'Each delta: the row minus the reference row of the same (scene, seed), '
             'mean +- std over pairs (wins/n: pairs where the row is better: higher PSNR / '
-            'SSIM, lower LPIPS), the two-sided paired t-test p-value and the paired '
-            'bootstrap 95% interval of the mean delta. **Bold**: a gain is shown (the '
-            'interval excludes 0 and p < 0.05); anything else is not a gain. References: '
+            'SSIM, lower LPIPS), the two-sided paired t-test p-value, its Holm '
+            'adjustment ("Holm") over the rows compared with the same reference in the '
+            'same table (one column; the pooled table is a table of its own) and the '
+            'paired bootstrap 95% interval of the mean delta (unadjusted). **Bold**: a '
+            'gain is shown (the interval excludes 0 and the Holm p < 0.05); anything else '
+            'is not a gain. References: '
             "B; D's seed K 0 = B's training at D's seed (Config.d_seed), i.e. D without "
             "pseudo-views, the control that differs from R1 in the pseudo-views alone; "
             "D's seed 2x = the same at 2x B's steps; B 2x = B trained 2x longer (the "
@@ -388,6 +418,25 @@ def markdown(summary, scenes, command, sources=(), backbone='nerf'):
   if sources:
     lines += ['Merged from the tables of:', ''] + [f'    {c}' for c in sources] + ['']
   return '\n'.join(lines)
+
+
+def refresh(path):
+  """Rewrites the table `path` (its .json summary and its .md) from its rows with the
+  current statistics; its command, sources and everything else are kept."""
+  table = report.read_json(path)
+  if 'rows' not in table or 'summary' not in table or 'command' not in table:
+    raise SystemExit(f'--refresh: {path} is not a renerf_scenes table')
+  rows = {sc: {label: {int(seed): m for seed, m in by_seed.items()}
+               for label, by_seed in labels.items()} for sc, labels in table['rows'].items()}
+  scenes = list(rows)
+  seeds = sorted({s for labels in rows.values() for by_seed in labels.values()
+                  for s in by_seed})
+  table['summary'] = summarize(rows, scenes, seeds)
+  report.write_json(path, table)
+  base = os.path.splitext(path)[0]
+  report.write_markdown(base + '.md', markdown(
+      table['summary'], scenes, table['command'], table.get('sources', ()),
+      table.get('backbone', 'nerf')))
 
 
 def plot(summary, scenes, path):
@@ -422,6 +471,10 @@ def main(argv=None):
   args = p.parse_args(argv)
   command = tables.command_line('experiments.renerf_scenes', argv)
   table = args.table or args.name
+  if args.refresh:
+    for path in args.refresh:
+      refresh(path)
+    return
   if args.merge:
     all_rows, seeds, sources, (config, _, _), backbone = merged_rows(args.merge)
     scenes = list(all_rows)

@@ -11,6 +11,18 @@ each process sums every other chunk and the two sums are added, another order of
 additions than one process's, so the rendered uncertainty may differ in the last bits
 (checked to rtol 1e-5); its masks (U below the k-th smallest U) come out the same here.
 
+Bit for bit needs one more condition: the same XLA:CPU thread pool. A process's pool has
+max(CPUs it may use, its devices) threads, and XLA:CPU splits the sums of large dot
+products (Eigen's contractions, e.g. a render chunk's matmuls) by the pool's size. The
+reference process (2 devices) has at least 2 threads; each of the two processes (1
+device) has as many as the CPUs it may use. So with 2 or more CPUs every process has the
+same pool and the runs are bit-identical; pinned to one CPU (taskset -c 0) the pools
+differ (2 threads against 1) and so may the last bit of a few values: issue 62 measured
+13 of 46,080 pseudo-view values 1 ulp (3e-8) apart on an AVX2-only CPU (on an AVX-512 one
+they came out equal). There the test compares every number to RTOL / ATOL instead:
+float32 rounding carried through 20 steps stays orders of magnitude below them, while a
+wrong batch, key or gradient changes the logged loss by percents.
+
 A run in which process 0 (the writer and the coordinator) dies by SIGKILL at the rename
 of a round-1 checkpoint (its temp file complete: the worst moment of an atomic write)
 stops process 1 with one error line and leaves no partial checkpoint; a rerun finishes
@@ -48,6 +60,10 @@ BINDINGS = [
     "Config.mask_signal = 'laplace'", 'Config.hessian_rays = 1024',
     'Config.hessian_chunk = 256', 'Config.deform_log2_res = 4']
 METRICS = ('psnr', 'ssim')  # LPIPS off: each process would compile AlexNet.
+# Bit for bit when every process has the reference's thread pool (module docstring): 2 or
+# more CPUs for this process and the ones it starts; otherwise to float32 rounding.
+BIT_IDENTICAL = len(os.sched_getaffinity(0)) >= 2
+RTOL, ATOL = 1e-5, 1e-6
 TIMEOUT = 600  # Seconds any one launch may take before the test kills it.
 
 
@@ -201,6 +217,21 @@ def test_bench_counts_the_bytes_of_every_all_reduce():
                                        'all-gather': (1, 64)}
 
 
+def test_the_float32_comparison_takes_rounding_and_refuses_a_real_difference():
+  """The comparison used where the thread pools differ (one CPU): 1 ulp passes, a change
+  a wrong step would make does not; the exact one refuses even 1 ulp."""
+  x = np.linspace(0.01, 1., 46080, dtype=np.float32)
+  ulp = x.copy()
+  ulp[::3000] = np.nextafter(ulp[::3000], np.float32(2.))
+  _equal(ulp, x, exact=False)
+  with pytest.raises(AssertionError):
+    _equal(ulp, x, exact=True)
+  with pytest.raises(AssertionError):
+    _equal(x * np.float32(1.0001), x, exact=False)
+  with pytest.raises(AssertionError):
+    _equal(0.0465510, 0.0465487, exact=False)  # 1 vs 2 devices (multi_host.md)
+
+
 def test_one_process_is_the_identity():
   tree = {'a': np.arange(3.)}
   assert distributed.local(tree) is tree and distributed.replicate(tree, None) is tree
@@ -289,25 +320,38 @@ def reference(tmp_path_factory):
   return tmp / 'run'
 
 
-def _assert_same_run(run, ref):
+def _equal(got, want, exact):
+  """Arrays (or numbers) equal bit for bit, or to RTOL / ATOL where exact is False."""
+  if exact:
+    np.testing.assert_array_equal(got, want)
+  else:
+    np.testing.assert_allclose(got, want, rtol=RTOL, atol=ATOL)
+
+
+def _assert_same_run(run, ref, exact=BIT_IDENTICAL):
   for r in (0, 1):
     got, want = _log(run, r), _log(ref, r)
     assert [g['step'] for g in got] == [w['step'] for w in want] == [5, 10, 15, 20]
     for g, w in zip(got, want):
-      for k in ('loss', 'psnr', 'eval_psnr', 'pseudo_rays', 'nan_skips'):
+      for k in ('pseudo_rays', 'nan_skips'):
         assert g.get(k) == w.get(k), (r, g['step'], k)
+      for k in ('loss', 'psnr', 'eval_psnr'):
+        assert (k in g) == (k in w), (r, g['step'], k)
+        if k in w:
+          _equal(g[k], w[k], exact)
   got, want = (json.loads((d / 'rounds.json').read_text()) for d in (run, ref))
   for g, w in zip(got, want):
     for k in METRICS:
-      assert g[k] == w[k], (g['round'], k)
+      _equal(g[k], w[k], exact)
   for r in (0, 1):
     got, want = (serialization.msgpack_restore((d / f'round_{r}' / 'params.msgpack')
                                                .read_bytes()) for d in (run, ref))
-    jax.tree_util.tree_map(np.testing.assert_array_equal, got, want)
+    jax.tree_util.tree_map(lambda a, b: _equal(a, b, exact), got, want)
   with np.load(run / 'round_1' / 'pseudo_views' / 'views.npz') as g, np.load(
       ref / 'round_1' / 'pseudo_views' / 'views.npz') as w:
-    for k in ('images', 'poses', 'masks'):
+    for k in ('poses', 'masks'):
       np.testing.assert_array_equal(g[k], w[k])
+    _equal(g['images'], w['images'], exact)
     assert 0 < np.mean(w['masks']) < 1  # The masks mask something.
     np.testing.assert_allclose(g['uncertainty'], w['uncertainty'], rtol=1e-5)
 

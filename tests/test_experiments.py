@@ -411,7 +411,8 @@ def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_ba
   assert (got['mean'], got['std'], got['wins']) == pytest.approx(
       (-0.1, np.std([0.3, -0.5], ddof=1), 1))
   assert s2['mean']['B 2x steps']['pooled_2x'] == {}
-  assert '| -0.10 +- 0.57 (1/2), p 0.84, [' in renerf_scenes.markdown(s2, ['fern'], 'cmd')
+  assert '| -0.10 +- 0.57 (1/2), p 0.84, Holm 0.84, [' in renerf_scenes.markdown(s2, ['fern'],
+                                                                              'cmd')
   gs = renerf_scenes.markdown(summary, ['fern'], 'cmd', backbone='gaussians')
   assert_table_cells(gs)
   assert_table_cells(renerf_scenes.markdown(s2, ['fern'], 'cmd'))
@@ -433,6 +434,60 @@ def test_scenes_table_of_gaussians_names_the_papers_3dgs_delta_and_merges_its_ba
   merged, seeds, _, _, backbone = renerf_scenes.merged_rows(paths)
   assert backbone == 'gaussians' and seeds == [0, 1]
   assert merged['fern']['R1'] == rows['fern']['R1']
+
+
+def test_scenes_table_holm_adjusts_each_column_and_refresh_rewrites_a_table(tmp_path):
+  """Issue 62: each column of a scene's table (the rows compared with one reference) is
+  one Holm family; "shown" uses the Holm p; over one scene the pooled table repeats the
+  scene's Holm p; over several it is a family of its own. --refresh rebuilds a table's
+  statistics and markdown from its rows and keeps its command."""
+  from experiments import paired  # pylint: disable=g-import-not-at-top
+  m = lambda p: {'psnr': p, 'ssim': 0.5, 'lpips_alex': 0.3, 'cumulative_seconds': 10.}
+  b = [20., 21., 19.5, 20.5, 20.2]
+  gains = {'R1': [0.3, 0.9, 0.4, 1.2, 0.2],  # p 0.036 alone: shown; not in a family of 3
+           renerf_scenes.CONTROL: [0.5, -0.6, 0.2, -0.3, 0.1],
+           renerf_scenes.TWO_X: [0.1, 0.3, -0.2, 0.2, 0.4]}
+  rows = {'lego': dict({'B': {s: m(v) for s, v in enumerate(b)}},
+                       **{lb: {s: m(v + d) for s, (v, d) in enumerate(zip(b, g))}
+                          for lb, g in gains.items()})}
+  summary = renerf_scenes.summarize(rows, ['lego'], list(range(5)))
+  alone = {lb: paired.paired_summary(g) for lb, g in gains.items()}
+  assert alone['R1']['shown']
+  want = paired.holm_adjust([alone[lb]['p'] for lb in gains])
+  res = summary['scenes']['lego']
+  for lb, w in zip(gains, want):
+    got = res[lb]['paired']['psnr']
+    assert got['p'] == pytest.approx(alone[lb]['p']) and got['p_holm'] == pytest.approx(w)
+    assert got['family'] == 3
+  assert not res['R1']['paired']['psnr']['shown']
+  assert summary['mean']['R1']['pooled']['psnr'] == res['R1']['paired']['psnr']
+  md = renerf_scenes.markdown(summary, ['lego'], 'cmd')
+  assert '| R1 | 20.84 +- 0.90 | ' in md
+  assert '| +0.60 +- 0.43 (5/5), p 0.036, Holm 0.11, [+0.28, +0.94] |' in md  # not bold
+  assert 'the Holm p < 0.05' in md
+  assert_table_cells(md)
+  # Two scenes: the pooled column is a family of its own (R1, control, B 2x pooled).
+  two = renerf_scenes.summarize({'lego': rows['lego'], 'fox': rows['lego']}, ['lego', 'fox'],
+                                list(range(5)))
+  assert two['mean']['R1']['pooled']['psnr']['family'] == 3
+  assert two['mean']['R1']['pooled']['psnr']['n'] == 10
+  # --refresh: an old table's summary and markdown are rewritten, its command kept.
+  path = tmp_path / 'old.json'
+  path.write_text(json.dumps({'command': 'python -m experiments.renerf_scenes --name old',
+                              'rows': {'lego': {lb: {str(s): v for s, v in by.items()}
+                                                for lb, by in rows['lego'].items()}},
+                              'summary': {'scenes': {}, 'mean': {}}, 'seeds': [0]}))
+  renerf_scenes.main(['--name', 'x', '--refresh', str(path)])
+  table = json.loads(path.read_text())
+  assert table['command'] == 'python -m experiments.renerf_scenes --name old'
+  assert table['summary']['scenes']['lego']['R1']['paired']['psnr']['p_holm'] == (
+      pytest.approx(want[0]))
+  text = (tmp_path / 'old.md').read_text()
+  assert text == renerf_scenes.markdown(summary, ['lego'], table['command'])
+  assert not (tmp_path / 'old.png').exists()
+  (tmp_path / 'bad.json').write_text('{"rows": {}}')
+  with pytest.raises(SystemExit, match='bad.json is not a renerf_scenes table'):
+    renerf_scenes.main(['--name', 'x', '--refresh', str(tmp_path / 'bad.json')])
 
 
 def test_scenes_table_with_d_sharing_b_seed_copies_b_as_its_controls(tmp_path):
@@ -487,6 +542,39 @@ def test_seed_spread_reports_each_rows_spread_and_the_views_that_spread(tmp_path
                       str(tmp_path / 'x')])
 
 
+def test_seed_spread_compares_two_spreads_with_an_f_test(tmp_path):
+  """--f_test: the PSNRs of one or more rows pooled per group, both stds and the
+  two-sided F-test's p (issue 62: a spread claim needs a variance test)."""
+  import scipy.stats  # pylint: disable=g-import-not-at-top
+  from experiments import seed_spread  # pylint: disable=g-import-not-at-top
+  from renerf_jax import report  # pylint: disable=g-import-not-at-top
+  m = lambda p: {'psnr': p, 'ssim': 0.5, 'lpips_alex': 0.2}
+  wide = [20., 22., 21., 23., 19.]
+  narrow = [21., 21.2, 20.9, 21.1]
+  report.write_json(str(tmp_path / 'a.json'), {'rows': {'lego': {
+      'B': {str(i): m(v) for i, v in enumerate(wide[:3])},
+      'C': {str(i): m(v) for i, v in enumerate(wide[3:])}}}})
+  report.write_json(str(tmp_path / 'b.json'), {'rows': {'lego': {
+      'B': {str(i): m(v) for i, v in enumerate(narrow)}}}})
+  a, b = tmp_path / 'a.json', tmp_path / 'b.json'
+  seed_spread.main(['--tables', str(a), str(b), '--f_test', f'wide={a}:lego:B;{a}:lego:C',
+                    f'narrow={b}:lego:B', '--out', str(tmp_path / 's')])
+  [t] = json.loads((tmp_path / 's.json').read_text())['f_tests']
+  ratio = np.var(wide, ddof=1) / np.var(narrow, ddof=1)
+  assert (t['n_a'], t['n_b']) == (5, 4) and t['ratio'] == pytest.approx(ratio)
+  assert t['p'] == pytest.approx(2 * scipy.stats.f.sf(ratio, 4, 3), rel=1e-9)
+  assert t['shown'] == (t['p'] < 0.05)
+  md = (tmp_path / 's.md').read_text()
+  assert f"| wide | 5 | {np.std(wide, ddof=1):.2f} | narrow | 4 | " in md
+  assert_table_cells(md)
+  with pytest.raises(SystemExit, match="has no row 'X'"):
+    seed_spread.main(['--tables', str(a), '--f_test', f'x={a}:lego:X', f'y={a}:lego:B',
+                      '--out', str(tmp_path / 'x')])
+  with pytest.raises(SystemExit, match='not LABEL=TABLE:SCENE:ROW'):
+    seed_spread.main(['--tables', str(a), '--f_test', 'x', f'y={a}:lego:B', '--out',
+                      str(tmp_path / 'x')])
+
+
 def test_compare_tables_pairs_rows_of_two_tables_by_scene_and_seed(tmp_path):
   """experiments/compare_tables.py: row of one table minus a row of another, paired by
   (scene, seed) over the common ones; a file that is no table is one clear error."""
@@ -512,6 +600,19 @@ def test_compare_tables_pairs_rows_of_two_tables_by_scene_and_seed(tmp_path):
   np.testing.assert_allclose(res['means']['b']['psnr'], (19. + 20.5 + 18.5) / 3)
   md = (tmp_path / 'res' / 'cmp.md').read_text()
   assert '| **all** | +0.33 +- 0.76 (2/3)' in md and 'compare_tables --a' in md
+  # One Holm family per column: fern (2 pairs) and the pooled row (room's 1 pair has no p).
+  fern, pooled = res['scenes']['fern']['psnr'], res['pooled']['psnr']
+  assert fern['family'] == pooled['family'] == 2 and res['scenes']['room']['psnr']['p'] is None
+  from experiments import paired  # pylint: disable=g-import-not-at-top
+  want = paired.holm_adjust([fern['p'], pooled['p']])
+  assert [fern['p_holm'], pooled['p_holm']] == pytest.approx(want)
+  assert f"Holm {pooled['p_holm']:.2g}" in md
+  # Over one scene the pooled row is that scene's test, not a second one.
+  compare_tables.main(['--a', str(tmp_path / 'a.json'), '--a_label', 'drop', '--b',
+                       str(tmp_path / 'b.json'), '--b_label', 'plain', '--out', str(out)])
+  one = compare_tables.compare({'fern': a['rows']['fern']}, 'B', {'fern': b['rows']['fern']}, 'B')
+  assert one['pooled']['psnr'] == one['scenes']['fern']['psnr']
+  assert one['pooled']['psnr']['p_holm'] == pytest.approx(one['pooled']['psnr']['p'])
   (tmp_path / 'bad.json').write_text('{"name": 1}')
   with pytest.raises(SystemExit, match='bad.json: not a renerf_scenes table'):
     compare_tables.main(['--a', str(tmp_path / 'bad.json'), '--a_label', 'x',

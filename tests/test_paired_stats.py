@@ -107,3 +107,69 @@ def test_format_cell_bolds_a_shown_gain():
   assert not n.startswith('**') and '(2/3), p ' in n
   assert paired.format_cell(paired.paired_summary([0.3])) == '+0.30 +- 0.00 (1/1)'
   assert paired.format_cell({}) == ''
+
+
+def test_holm_adjustment_on_known_families():
+  """Holm by hand: sorted p times (m, m-1, ...), made monotone, capped at 1; None skipped."""
+  assert paired.holm_adjust([0.01, 0.04, 0.03, 0.005]) == pytest.approx([0.03, 0.06, 0.06,
+                                                                         0.02])
+  assert paired.holm_adjust([0.5, None, 0.2]) == [pytest.approx(0.5), None,
+                                                  pytest.approx(0.4)]
+  assert paired.holm_adjust([0.6, 0.7]) == pytest.approx([1., 1.])  # capped
+  assert paired.holm_adjust([0.03]) == pytest.approx([0.03])  # a family of one
+  assert paired.holm_adjust([]) == []
+  # Ties keep one value; order given is kept.
+  assert paired.holm_adjust([0.02, 0.02, 0.001]) == pytest.approx([0.04, 0.04, 0.003])
+
+
+def test_a_family_decides_shown_on_the_holm_p():
+  """Issue 62's 3DGS fox table: R1 - control p 0.027 and R1 - control 2x p 0.041 are
+  shown alone, not beside a third comparison of the same table (Holm 0.081, 0.12)."""
+  clear = paired.paired_summary([0.8, 1.1, 0.9, 1.3, 0.7])  # p ~ 1e-3
+  weak = paired.paired_summary([0.3, 0.9, 0.4, 1.2, 0.2])  # p 0.036
+  noise = paired.paired_summary([0.5, -0.6, 0.2, -0.3, 0.1])
+  assert weak['shown'] and 0.01 < weak['p'] < 0.05 and weak['ci'][0] > 0.
+  family = paired.adjust_family([clear, weak, noise, {}])
+  assert [s['family'] for s in family] == [3, 3, 3]
+  assert weak['p_holm'] == pytest.approx(2 * weak['p'])  # second smallest of 3
+  assert clear['p_holm'] == pytest.approx(3 * clear['p']) and clear['shown']
+  assert not weak['shown'] and not noise['shown'] and noise['p_holm'] == pytest.approx(
+      noise['p'])
+  assert '(5/5), p 0.0' in paired.format_cell(weak) and ', Holm 0.0' in paired.format_cell(weak)
+  assert not paired.format_cell(weak).startswith('**')
+  # A loss in a family: LPIPS, lower is better.
+  loss = paired.paired_summary([0.02, 0.03, 0.025, 0.02, 0.03], better=-1.)
+  paired.adjust_family([loss, paired.paired_summary([0.01, -0.01, 0.0], better=-1.)],
+                       better=-1.)
+  assert loss['loss_shown'] and not loss['shown'] and loss['p_holm'] == pytest.approx(
+      2 * loss['p'])
+
+
+@pytest.mark.parametrize('x,d1,d2', [(0.5, 2, 2), (3.63, 7, 7), (1., 4, 9), (12., 1, 3)])
+def test_f_distribution_matches_closed_form_and_scipy(x, d1, d2):
+  got = paired.f_cdf(x, d1, d2)
+  assert got == pytest.approx(scipy.stats.f.cdf(x, d1, d2), rel=1e-9)
+  if d1 == d2 == 2:
+    assert got == pytest.approx(x / (1. + x), rel=1e-12)  # F(2, 2)'s closed form
+
+
+def test_f_test_of_two_spreads():
+  """Issue 62: lego's B, std 0.25 (faces clamped) against 0.13 dB (empty outside the
+  box), 8 seeds each: "the spread halves" is not shown (p 0.11)."""
+  clamped = [22.085, 22.249, 21.64, 22.483, 22.258, 22.247, 22.046, 22.315]
+  empty = [22.361, 22.199, 22.237, 22.129, 22.081, 22.077, 22.165, 21.912]
+  t = paired.f_test(clamped, empty)
+  assert (t['std_a'], t['std_b']) == pytest.approx((0.2514, 0.1319), abs=1e-4)
+  assert t['p'] == pytest.approx(0.110, abs=1e-3) and not t['shown']
+  # Symmetric, and equal to scipy's two-sided F-test.
+  assert paired.f_test(empty, clamped)['p'] == pytest.approx(t['p'], rel=1e-9)
+  ratio = np.var(clamped, ddof=1) / np.var(empty, ddof=1)
+  assert t['p'] == pytest.approx(2 * scipy.stats.f.sf(ratio, 7, 7), rel=1e-9)
+  # A spread 4x smaller over 8 seeds each is shown.
+  rng = np.random.default_rng(0)
+  wide, narrow = rng.normal(0., 1., 8), rng.normal(0., 0.25, 8)
+  assert paired.f_test(wide, narrow)['shown']
+  assert paired.f_test([1., 2.], [3., 4.])['p'] == pytest.approx(1.)
+  assert paired.f_test([1., 1., 1.], [2., 2.])['p'] == 1.
+  with pytest.raises(ValueError, match='at least 2'):
+    paired.f_test([1.], [1., 2.])

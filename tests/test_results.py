@@ -1,4 +1,5 @@
 """Results folders (experiments/results/<question>/): each says how it was made."""
+import json
 import os
 import pathlib
 import re
@@ -134,3 +135,31 @@ def test_readme_commands_exist_and_their_configs_parse():
   links = re.findall(r'\]\((experiments/results/[\w/]+)\)', readme.read_text())
   assert links and all((REPO / link).is_dir() for link in links), links
   assert len(readme.read_text().splitlines()) <= 120  # issue 35: read in two minutes
+
+
+def test_the_forest_plot_draws_the_tables_numbers(tmp_path):
+  """Issue 62: the README's picture (experiments/results/forest_plot.png, `python -m
+  experiments.forest_plot`) holds the tables' numbers: the committed forest_plot.json is
+  what the tables give now, and each line, printed as its table prints a cell, stands in
+  the R1 row of that table's pooled part."""
+  from experiments import forest_plot, paired  # pylint: disable=g-import-not-at-top
+  lines = forest_plot.lines(str(RESULTS))
+  committed = json.loads((RESULTS / 'forest_plot.json').read_text())
+  assert committed['lines'] == lines, 'stale: run python -m experiments.forest_plot'
+  assert committed['command'] == 'python -m experiments.forest_plot'
+  assert {line['group'] for line in lines} == {g for g, _, _, _ in forest_plot.SOURCES}
+  assert len(lines) >= 20
+  for line in lines:
+    md = (RESULTS / line['table']).with_suffix('.md').read_text()
+    pooled = md[md.index('### Over scenes'):]
+    [r1_row] = [ln for ln in pooled.splitlines() if ln.startswith('| R1 |')]
+    assert f"| {paired.format_cell(line)} |" in r1_row, (line['table'], line['comparison'])
+    lo, hi = line['ci']
+    assert lo <= line['mean'] <= hi and line['n'] >= 2
+    assert line['shown'] == (line['p_holm'] < 0.05 and lo > 0.)
+  # Drawn from the same numbers, into another folder.
+  forest_plot.main(['--out', str(tmp_path / 'fp')])
+  assert json.loads((tmp_path / 'fp.json').read_text())['lines'] == lines
+  assert (tmp_path / 'fp.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+  readme = (REPO / 'README.md').read_text()
+  assert '](experiments/results/forest_plot.png)' in readme
