@@ -20,7 +20,7 @@ import flax
 import numpy as np
 
 from renerf_jax import backbones, fit, metrics, report
-from renerf_jax.errors import ConfigError
+from renerf_jax.errors import ConfigError, DataError
 from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses
 
 
@@ -115,7 +115,7 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
   ev = evaluate_fn(cfg, scene, result.state.params)
   metrics = dict(ev.mean, round=r, round_seconds=synth_seconds + result.train_seconds,
                  cumulative_seconds=seconds, nan_skips=int(result.state.nan_skips))
-  if len(scene.val_idx):  # The validation views' means as val_<metric> (not stored).
+  if len(scene.val_idx):  # The validation views' means as val_<metric> (no renders kept).
     val = backbone.evaluate(cfg, validation_scene(scene), result.state.params,
                             show_progress=False)
     metrics.update({f'val_{k}': v for k, v in val.mean.items()})
@@ -131,9 +131,12 @@ def check_rounds_config(config, scene):
   pair to interpolate), a bad Config.interp_factors or Config.pseudo_targets, or the
   oracle (Config.pseudo_source='photo') with masks, would only fail after the baseline
   had trained. With num_rounds = 0 only LPIPS-alex against the image size is checked
-  (the baseline alone needs no pseudo-views).
+  (the baseline alone needs no pseudo-views), and that a Gaussian SfM start has points.
   """
   metrics.check_lpips_size(config.lpips_nets, scene.height, scene.width)
+  if config.backbone == 'gaussians' and config.gs_init == 'sfm' and scene.points is None:
+    raise DataError(f"scene {scene.name!r}: Config.gs_init='sfm' needs SfM points (a "
+                    "COLMAP model's points3D or a transforms.json ply_file_path)")
   if config.num_rounds > 0:
     pseudo_view_poses(config, scene)
     if config.seed_control and config.renerf_init != 'reset':

@@ -11,9 +11,9 @@ import pytest
 
 from colmap_helpers import write_model
 from conftest import DATA
-from renerf_jax import cameras
+from renerf_jax import cameras, renerf
 from renerf_jax.configs import Config
-from renerf_jax.datasets import colmap, colmap_io, load_scene
+from renerf_jax.datasets import colmap, colmap_io, load_scene, undistort
 from renerf_jax.datasets.points import read_points_ply
 from renerf_jax.errors import DataError
 from renerf_jax.gaussians import start
@@ -63,7 +63,7 @@ def tiny_capture(root, ext='bin', n=10, size=(12, 16), model='SIMPLE_RADIAL',
     # OpenCV camera at angle a on a circle of radius 4, looking at the origin.
     a = 2 * np.pi * i / n
     centre = np.array([4 * np.sin(a), 0.3 * np.cos(3 * a), -4 * np.cos(a)])
-    r_c2w = _rot(1, -a)  # z axis (forward) towards the origin
+    r_c2w = _rot(1, -a) @ _rot(0, 0.2 * np.sin(a)) @ _rot(2, 0.1 * np.cos(2 * a))  # tilted
     r_w2c = r_c2w.T
     t = -r_w2c @ centre
     cam_id = i + 1 if per_photo else 1
@@ -174,6 +174,22 @@ def test_garden_points_and_the_sfm_start_of_the_training_views():
   assert 0.9 < inside < 1.  # The 1st-99th percentile box of the points.
   pts, rgb = start.sfm_start(s, jax.random.PRNGKey(1), 5000)
   assert pts.shape == (5000, 3) and rgb.shape == (5000, 3)
+  # The ply's points are in the json's frame: reprojected into training views they land
+  # on pixels of their colour (against the mirrored pixels as a control).
+  err, control = [], []
+  for v in s.train_idx[:6]:
+    c2w = s.poses[v].astype(np.float64)
+    local = (pts - c2w[:, 3]) @ c2w[:, :3]
+    ok = local[:, 2] < -0.05
+    u = s.focal * local[ok, 0] / -local[ok, 2] + s.width / 2
+    y = -s.focal * local[ok, 1] / -local[ok, 2] + s.height / 2
+    inside = (u >= 0) & (u < s.width) & (y >= 0) & (y < s.height)
+    ui, yi = u[inside].astype(int), y[inside].astype(int)
+    err.append(np.abs(s.images[v][yi, ui] - rgb[ok][inside]).mean(-1))
+    control.append(np.abs(s.images[v][s.height - 1 - yi, s.width - 1 - ui]
+                          - rgb[ok][inside]).mean(-1))
+  err, control = np.concatenate(err), np.concatenate(control)
+  assert len(err) > 1000 and np.median(err) < 0.6 * np.median(control)
   again, _ = start.sfm_start(s, jax.random.PRNGKey(1), 5000)
   np.testing.assert_array_equal(pts, again)  # Seeded.
   g = start.init_gaussians(Config(backbone='gaussians', gs_init='sfm', gs_init_points=5000,
@@ -185,11 +201,14 @@ def test_garden_points_and_the_sfm_start_of_the_training_views():
                              atol=1e-5)
 
 
-def test_sfm_start_needs_points():
+def test_sfm_start_needs_points_and_says_so_before_training():
   from tiny_scene import TINY  # pylint: disable=g-import-not-at-top
   s = load_scene(TINY)
   with pytest.raises(DataError, match="gs_init='sfm' needs SfM points"):
     start.sfm_start(s, jax.random.PRNGKey(0), 10)
+  with pytest.raises(DataError, match="gs_init='sfm' needs SfM points"):
+    renerf.check_rounds_config(Config(backbone='gaussians', gs_init='sfm',
+                                      lpips_nets=()), s)
 
 
 def test_per_photo_cameras_need_undistort(tmp_path):
@@ -255,7 +274,7 @@ def test_bad_colmap_inputs_give_one_line_naming_the_file(tmp_path):
             os.path.join(good, 'images.bin')), colmap_io.read_points_bin(
                 os.path.join(good, 'points3D.bin')))
     msg = _one_line(load)
-    assert f'camera model {model_name} is not supported' in msg and 'sparse/0' in msg
+    assert f'camera model {model_name} is not supported' in msg and 'cameras.bin' in msg
   with open(os.path.join(model, 'cameras.bin'), 'r+b') as f:
     f.seek(12)
     f.write((99).to_bytes(4, 'little'))
@@ -265,6 +284,54 @@ def test_bad_colmap_inputs_give_one_line_naming_the_file(tmp_path):
   assert 'images.bin: the model holds no images' in _one_line(load)
   shutil.rmtree(model)
   assert 'sparse: no COLMAP model' in _one_line(load)
+
+
+def test_bad_text_values_and_sizes_are_one_line(tmp_path):
+  scene, _ = tiny_capture(tmp_path, ext='txt')
+  model = os.path.join(scene, 'sparse', '0')
+  load = lambda: load_scene(_config(tmp_path))
+  pts = os.path.join(model, 'points3D.txt')
+  with open(pts) as f:
+    good = f.read()
+  with open(pts, 'w') as f:
+    f.write(good.replace(' 0.5', ' 0.5', 1).split('\n', 1)[0].rsplit(' ', 100)[0][:0]
+            + '1 0.0 0.0 0.0 300 2 3 0.5\n')
+  assert 'points3D.txt: line 1: a colour outside 0-255' in _one_line(load)
+  with open(pts, 'w') as f:
+    f.write(good)
+  cams = os.path.join(model, 'cameras.txt')
+  with open(cams, 'a') as f:
+    f.write('7 PINHOLE 0 12 20 20 8 6\n')
+  assert 'camera 7 is 0x12 pixels' in _one_line(load)
+  # A blank line before an image line is skipped, as COLMAP's reader does.
+  with open(cams) as f:
+    lines = f.read().splitlines()[:-1]
+  with open(cams, 'w') as f:
+    f.write('\n'.join(lines) + '\n')
+  imgs = os.path.join(model, 'images.txt')
+  with open(imgs) as f:
+    text = f.read()
+  with open(imgs, 'w') as f:
+    f.write('\n' + text)
+  assert len(load_scene(_config(tmp_path)).poses) == 10
+
+
+def test_each_photo_is_resampled_through_its_own_camera():
+  """Two photos of one view direction field g(x) = x (x = (u - cx) / f) through
+  different focals: resampled to the shared pinhole camera they are the same image, that
+  camera's g; resampling both through the first photo's camera would not be."""
+  h, w = 8, 40
+  intr = [(30., 30., 20., 4., 0., 0., 0., 0.), (36., 36., 20., 4., 0., 0., 0., 0.)]
+  u = np.arange(w) + 0.5
+  photos = np.stack([np.broadcast_to(((u - i[2]) / i[0])[None, :, None], (h, w, 1))
+                     for i in intr]).astype(np.float64)
+  out, focal = undistort.undistort_each(photos, intr)
+  assert focal == pytest.approx(36., rel=1e-3)  # The narrower photo decides.
+  want = (u - w / 2) / focal
+  np.testing.assert_allclose(out[:, 3, 1:-1, 0], np.stack([want[1:-1]] * 2), atol=1e-3)
+  # Through the first photo's camera alone the two photos stay two cameras' images.
+  wrong, _ = undistort.undistort_images(photos, intr[0])
+  assert np.abs(wrong[1, 3, 1:-1, 0] - wrong[0, 3, 1:-1, 0]).max() > 0.05
 
 
 def test_train_cli_refuses_a_bad_capture_with_exit_2_and_writes_nothing(tmp_path, capsys):
@@ -309,6 +376,9 @@ def test_ply_reader_ascii_and_binary(tmp_path):
   no_colour.write_text('ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n'
                        'property float y\nproperty float z\nend_header\n0 0 0\n')
   assert 'no "red" property' in _one_line(lambda: read_points_ply(str(no_colour)))
+  bad = tmp_path / 'e.ply'
+  bad.write_text('ply\nformat ascii 1.0\nelement vertex abc\nend_header\n')
+  assert "bad header line 'element vertex abc'" in _one_line(lambda: read_points_ply(str(bad)))
   nan = tmp_path / 'd.ply'
   nan.write_text(head.format('ascii 1.0') + '0 nan 0 1 2 3\n1 1 1 1 1 1\n')
   assert 'non-finite position' in _one_line(lambda: read_points_ply(str(nan)))

@@ -121,3 +121,23 @@ def test_convergence_scores_b_on_validation_views(monkeypatch):
   del runs[(1000, 1)]['metrics']['val_psnr']
   with pytest.raises(ValueError, match='seed1: no validation metrics'):
     convergence.summarize('r', ['fern'], [0, 1], [1000, 2000])
+
+
+def test_compare_choices_pairs_candidates_on_validation_views():
+  from experiments import compare_choices  # pylint: disable=g-import-not-at-top
+  run = lambda v, t: {'metrics': {'val_psnr': v, 'val_ssim': .5 + v / 100, 'val_lpips_alex':
+                                  .3 - v / 100, 'psnr': t}}
+  results = {'a': {0: run(20., 25.), 1: run(21., 25.), 2: run(22., 25.)},
+             'b': {0: run(21., 20.), 1: run(22.5, 20.), 2: run(23., 20.)}}
+  rows = compare_choices.compare(results, 'a')
+  b = rows[1]
+  assert b['val_psnr'] == pytest.approx((22.1666667, 1.0408330))
+  assert b['delta_psnr']['mean'] == pytest.approx(7 / 6) and b['delta_psnr']['wins'] == 3
+  assert b['delta_lpips_alex']['wins'] == 3  # Lower LPIPS is better.
+  assert b['test_psnr'] == (20., 0.)  # Beside the choice, not in it.
+  assert 'delta_psnr' not in rows[0]
+  text = compare_choices.markdown(rows, 'a', 'fox', 4000, 'cmd')
+  assert '| b | 3 | 22.17 +- 1.04 |' in text and 'Holm' in text
+  del results['b'][1]['metrics']['val_psnr']
+  with pytest.raises(ValueError, match='b: no validation metrics'):
+    compare_choices.compare(results, 'a')

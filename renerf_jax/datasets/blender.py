@@ -6,7 +6,7 @@ import numpy as np
 
 from renerf_jax.datasets import images as image_io
 from renerf_jax.datasets.scene import Scene
-from renerf_jax.datasets.split import evenly_spaced
+from renerf_jax.datasets.split import validation_frames
 from renerf_jax.errors import DataError
 
 
@@ -96,16 +96,17 @@ def load_blender(config) -> Scene:
   scene_dir = os.path.join(config.data_dir, config.scene)
   if not os.path.isdir(scene_dir):
     raise DataError(f'scene folder not found: {scene_dir}')
+  if config.train_view_selection != 'linspace':
+    raise DataError(f'{scene_dir}: Config.train_view_selection applies to captures; a '
+                    'Blender layout chooses its training frames by Config.blender_split')
   tr_paths, tr_poses, angle = read_split(scene_dir, 'train')
   te_paths, te_poses, _ = read_split(scene_dir, 'test')
   pick, keep = blender_split(len(tr_paths), len(te_paths), config, scene_dir)
   te_paths, te_poses = [te_paths[i] for i in keep], te_poses[keep]
   if config.val_views:  # Evenly spaced frames of transforms_val.json.
     va_paths, va_poses, _ = read_split(scene_dir, 'val')
-    if config.val_views > len(va_paths):
-      raise DataError(f'Config.val_views={config.val_views} but '
-                      f'{scene_dir}/transforms_val.json has {len(va_paths)} frames')
-    vpick = evenly_spaced(np.arange(len(va_paths)), config.val_views)
+    vpick = validation_frames(len(va_paths), config.val_views,
+                              os.path.join(scene_dir, 'transforms_val.json'))
     te_paths += [va_paths[i] for i in vpick]
     te_poses = np.concatenate([te_poses, va_poses[vpick]], 0)
   paths = [tr_paths[i] for i in pick] + te_paths

@@ -18,6 +18,7 @@ than per-image intrinsics through both. The SfM points, with the images each is 
 moves cameras, points and box together. Every problem is one DataError line naming the
 file.
 """
+import logging
 import os
 
 import numpy as np
@@ -53,8 +54,12 @@ def model_dir_of(scene_dir):
 
 
 def image_dir_of(scene_dir, factor):
-  """images_<factor>/ where factor > 1 and it exists, else images/."""
+  """images_<factor>/ where factor > 1 and it exists, else images/ (a warning line says
+  so where factor > 1: Config.image_downsample then sets the resolution)."""
   sub = os.path.join(scene_dir, f'images_{factor}')
+  if factor > 1 and not os.path.isdir(sub):
+    logging.warning('%s not found: reading the full-size photos of images/ '
+                    '(Config.factor = 1 says so; Config.image_downsample downsamples)', sub)
   return sub if factor > 1 and os.path.isdir(sub) else os.path.join(scene_dir, 'images')
 
 
@@ -118,7 +123,8 @@ def load_colmap(config):
   cap = read_capture(scene_dir, config.factor)
   images = image_io.read_images(cap['paths'])
   shape = images.shape[1:3]
-  intr = [photo_intrinsics(c, shape, cap['model']) for c in cap['cameras']]
+  cameras_file = colmap_io.model_files(cap['model'])[0]
+  intr = [photo_intrinsics(c, shape, cameras_file) for c in cap['cameras']]
   shared = all(np.allclose(i, intr[0], rtol=1e-9, atol=1e-12) for i in intr)
   fx, fy, cx, cy = intr[0][:4]
   h, w = shape

@@ -115,6 +115,8 @@ def read_cameras_bin(path):
     if model_id not in CAMERA_MODELS:
       raise DataError(f'{path}: camera {cam_id} has an unknown model id {model_id}')
     name, k = CAMERA_MODELS[model_id]
+    if width < 1 or height < 1:
+      raise DataError(f'{path}: camera {cam_id} is {width}x{height} pixels')
     out[cam_id] = (name, int(width), int(height), r.read('d', k))
   r.finish()
   return out
@@ -189,6 +191,8 @@ def read_cameras_txt(path):
       raise DataError(f'{path}: line {line}: model {f[1]} has {k} parameters, the line '
                       f'{len(f) - 4}')
     cam_id, w, h = _numbers(path, line, [f[0], f[2], f[3]], int, 'an id or size')
+    if w < 1 or h < 1:
+      raise DataError(f'{path}: line {line}: camera {cam_id} is {w}x{h} pixels')
     out[cam_id] = (f[1], w, h, tuple(_numbers(path, line, f[4:], float, 'a parameter')))
   return out
 
@@ -197,22 +201,24 @@ def read_images_txt(path):
   """As read_images_bin, from images.txt (IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME,
   then a line of X Y POINT3D_ID triples)."""
   rows = _text_rows(path)
-  while rows and not rows[-1][1]:
-    rows.pop()
-  out = []
-  for j in range(0, len(rows), 2):
+  out, j = [], 0
+  while j < len(rows):
     line, f = rows[j]
+    if not f:  # A blank line where an image line is due (COLMAP's reader skips it too).
+      j += 1
+      continue
     if len(f) < 10:
       raise DataError(f'{path}: line {line}: not "IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID '
                       f'NAME": {" ".join(f)}')
     nums = _numbers(path, line, f[1:8], float, 'a pose value')
     image_id, cam_id = _numbers(path, line, [f[0], f[8]], int, 'an id')
-    pts = rows[j + 1][1] if j + 1 < len(rows) else []
+    pts_line, pts = rows[j + 1] if j + 1 < len(rows) else (line + 1, [])
     if len(pts) % 3:
-      raise DataError(f'{path}: line {rows[j + 1][0]}: the points line is not X Y '
-                      'POINT3D_ID triples')
-    ids = np.asarray(_numbers(path, line + 1, pts[2::3], int, 'a point id'), np.int64)
+      raise DataError(f'{path}: line {pts_line}: the points line is not X Y POINT3D_ID '
+                      'triples')
+    ids = np.asarray(_numbers(path, pts_line, pts[2::3], int, 'a point id'), np.int64)
     out.append((image_id, tuple(nums[:4]), tuple(nums[4:]), cam_id, ' '.join(f[9:]), ids))
+    j += 2
   return out
 
 
@@ -227,6 +233,8 @@ def read_points_txt(path):
     ids.append(_numbers(path, line, f[:1], int, 'the id')[0])
     xyz.append(_numbers(path, line, f[1:4], float, 'a position'))
     rgb.append(_numbers(path, line, f[4:7], int, 'a colour'))
+    if not all(0 <= v <= 255 for v in rgb[-1]):
+      raise DataError(f'{path}: line {line}: a colour outside 0-255: {" ".join(f[4:7])}')
     tracks.append(np.asarray(_numbers(path, line, f[8::2], int, 'an image id'), np.int32))
   return (np.asarray(ids, np.int64), np.asarray(xyz, np.float64).reshape(-1, 3),
           np.asarray(rgb, np.uint8).reshape(-1, 3), tracks)

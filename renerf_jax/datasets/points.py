@@ -29,9 +29,13 @@ def _header(data, path):
       continue
     if f[0] == 'format':
       fmt = f[1] if len(f) > 1 else None
-    elif f[0] == 'element' and len(f) == 3:
+    elif f[0] == 'element':
+      if len(f) != 3 or not f[2].isdigit():
+        raise DataError(f'{path}: bad header line {line.strip()!r}')
       elements.append([f[1], int(f[2]), []])
     elif f[0] == 'property' and elements:
+      if len(f) < 3:
+        raise DataError(f'{path}: bad header line {line.strip()!r}')
       if f[1] == 'list':
         raise DataError(f'{path}: list properties are not supported ({line.strip()})')
       if f[1] not in _PLY_TYPES:

@@ -33,6 +33,14 @@ def evenly_spaced(candidates, n):
   return candidates[np.round(np.linspace(0, len(candidates) - 1, n)).astype(int)]
 
 
+def validation_frames(n_frames, val_views, source):
+  """Config.val_views frames of a split file of n_frames (Blender's transforms_val.json),
+  evenly spaced; DataError naming `source` where it has fewer."""
+  if val_views > n_frames:
+    raise DataError(f'Config.val_views={val_views} but {source} has {n_frames} frames')
+  return evenly_spaced(np.arange(n_frames), val_views)
+
+
 def camera_distances(poses):
   """[N, N] distances of cameras: centre distance / spread + (1 - cos of the angle
   between the viewing directions).

@@ -39,7 +39,7 @@ from renerf_jax.datasets import undistort
 from renerf_jax.datasets.blender import blender_split
 from renerf_jax.datasets.points import points_box, read_points_ply
 from renerf_jax.datasets.scene import Scene
-from renerf_jax.datasets.split import evenly_spaced, split_of
+from renerf_jax.datasets.split import split_of, validation_frames
 from renerf_jax.errors import DataError
 
 DISTORTION_KEYS = ('k1', 'k2', 'p1', 'p2')
@@ -208,10 +208,7 @@ def load_transforms(config) -> Scene:
       if not os.path.isfile(val_file):
         raise DataError(f'Config.val_views={config.val_views} but {val_file} is missing')
       va_paths, va_poses, va_cams = read_frames(val_file, sort=False)
-      if config.val_views > len(va_paths):
-        raise DataError(f'Config.val_views={config.val_views} but {val_file} has '
-                        f'{len(va_paths)} frames')
-      vpick = evenly_spaced(np.arange(len(va_paths)), config.val_views)
+      vpick = validation_frames(len(va_paths), config.val_views, val_file)
       paths += [va_paths[i] for i in vpick]
       poses = np.concatenate([poses, va_poses[vpick]], 0)
       cams += [va_cams[i] for i in vpick]
