@@ -1,6 +1,6 @@
 """Test renders of a renerf_scenes table side by side: the photo | B | R1 | B 2x longer
 (at B's seed, or with --b2x d_seed B's training 2x longer at D's seed: the --no_b2x
-tables' control).
+tables' control; --b2x control: B's training at D's seed at B's steps).
 
 Reads the test-view PNGs and per-image metrics that every finished round already wrote
 (<run>/round_<r>/eval/test_XXX.png, metrics.json) from the run tree of
@@ -19,16 +19,18 @@ import os
 import imageio.v3 as iio
 import numpy as np
 
-from experiments.renerf_scenes import CONTROL_2X, TWO_X
+from experiments.renerf_scenes import CONTROL, CONTROL_2X, TWO_X
 from renerf_jax import figures, report, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
 from renerf_jax.evaluation import view_name
+from renerf_jax.round_driver import hardest_test_view
 
 # (column title, row folder of renerf_scenes.py, round); the last by --b2x.
 COLUMNS = (('B', 'Re-Nerfing', 0), ('R1', 'Re-Nerfing', 1))
 B2X_COLUMNS = {'b_seed': ('B 2x longer', TWO_X, 0),
-               'd_seed': ("B 2x longer, D's seed", CONTROL_2X, 0)}
+               'd_seed': ("B 2x longer, D's seed", CONTROL_2X, 0),
+               'control': ("control (D's seed)", CONTROL, 0)}
 
 
 def round_render(run_dir, r, view):
@@ -52,10 +54,12 @@ def main(argv=None):
   p.add_argument('--data_dir', default='../shared/data/nerf_llff_data')
   p.add_argument('--scenes', nargs='+', required=True)
   p.add_argument('--seed', type=int, default=0)
-  p.add_argument('--test_view', type=int, default=0,
-                 help='which test view (0: the first of the split)')
+  p.add_argument('--test_view', default='0',
+                 help="which test view (0: the first of the split; 'farthest': the one "
+                      'farthest from the training cameras, as train.py\'s comparison.png)')
   p.add_argument('--b2x', choices=sorted(B2X_COLUMNS), default='b_seed',
-                 help="the last column: B 2x longer at B's seed, or at D's seed")
+                 help="the last column: B 2x longer at B's seed, or at D's seed, or the "
+                      "seed-matched control (B's training at D's seed, B's steps)")
   p.add_argument('--out', required=True, help='output .png')
   args = p.parse_args(argv)
   columns = COLUMNS + (B2X_COLUMNS[args.b2x],)
@@ -64,10 +68,15 @@ def main(argv=None):
   for row, sc in enumerate(args.scenes):
     scene = load_scene(load_config(args.config, args.gin_bindings + [
         f'Config.data_dir = {args.data_dir!r}', f'Config.scene = {sc!r}']))
-    if not 0 <= args.test_view < len(scene.test_idx):
+    if args.test_view == 'farthest':
+      k = hardest_test_view(scene)
+    elif args.test_view.isdigit() and int(args.test_view) < len(scene.test_idx):
+      k = int(args.test_view)
+    else:
       raise SystemExit(f'error: --test_view {args.test_view}: {sc} has '
-                       f'{len(scene.test_idx)} test views')
-    view = int(scene.test_idx[args.test_view])
+                       f"{len(scene.test_idx)} test views (or give 'farthest')")
+    view = int(scene.test_idx[k])
+    print(f'{sc}: test view {k} of the split ({view_name(view)})')
     panels = [('photo', scene.images[view], None)]
     for title, folder, r in columns:
       img, psnr = round_render(os.path.join(args.runs, sc, folder, f'seed{args.seed}'), r,

@@ -9,6 +9,9 @@ import pytest
 
 from conftest import REPO, tree_files
 from experiments import renerf_scenes
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import load_scene
+from renerf_jax.round_driver import hardest_test_view
 
 TINY = ['Config.procedural_size = (32, 40)', 'Config.max_steps = 12',
         'Config.batch_size = 64', 'Config.num_samples = 8', 'Config.net_depth = 2',
@@ -342,6 +345,19 @@ def test_scenes_table_pairs_d_with_b_by_seed_against_2x_and_equal_time(tmp_path)
                        cwd=REPO, capture_output=True, text=True, timeout=300, check=False)
   assert sub.returncode == 0, sub.stderr[-3000:]
   assert (out / 'renders_d.png').read_bytes() != (out / 'renders.png').read_bytes()
+  # photo | B | R1 | control of the test view farthest from the training cameras.
+  sub = subprocess.run(renders + ['--seed', '1', '--b2x', 'control', '--test_view', 'farthest',
+                                  '--out', str(out / 'renders_c.png')],
+                       cwd=REPO, capture_output=True, text=True, timeout=300, check=False)
+  assert sub.returncode == 0, sub.stderr[-3000:]
+  scene = load_scene(load_config(['gin_configs/demo_llff.gin'],
+                                 ["Config.dataset_loader='procedural'"] + TINY))
+  k = hardest_test_view(scene)
+  assert f'procedural: test view {k} of the split' in sub.stdout
+  assert (out / 'renders_c.png').read_bytes() != (out / 'renders_d.png').read_bytes()
+  bad = subprocess.run(renders + ['--test_view', '99', '--out', str(out / 'none.png')],
+                       cwd=REPO, capture_output=True, text=True, timeout=300, check=False)
+  assert bad.returncode == 1 and "error: --test_view 99: procedural has" in bad.stderr
   bad = subprocess.run(renders + ['--seed', '7', '--out', str(out / 'none.png')], cwd=REPO,
                        capture_output=True, text=True, timeout=300, check=False)
   assert bad.returncode == 1 and 'seed7/round_0/eval/test_' in bad.stderr
