@@ -1,5 +1,7 @@
 """The NeRF backbone (Config.backbone = 'nerf'): the RegNeRF-style mip-NeRF with the MLP or
 grid field of Config.field, as the round driver sees it (backbones.Backbone)."""
+import functools
+
 import jax
 import numpy as np
 
@@ -10,13 +12,19 @@ from renerf_jax.nerf.evaluation import cheap_eval_fn, evaluate_test_views
 from renerf_jax.nerf.rendering import render_image
 
 
+@functools.partial(jax.jit, static_argnums=0)
+def _init_field_params(config, key):
+  return training.init_field_params(config, key)
+
+
 def nerf_init_params(config):
-  """The NeRF's parameter template (the init of seed key 0), as one compiled call.
+  """The NeRF's parameter template (the init of seed key 0), as one compiled call, traced
+  once per Config in a process (a table loads many rounds of one Config).
 
   flax's init run op by op compiled about 50 small programs per call (2.8 s for each
   round a table or the viewer loads); the optimiser state is not built.
   """
-  return jax.jit(lambda key: training.init_field_params(config, key))(jax.random.PRNGKey(0))
+  return _init_field_params(config, jax.random.PRNGKey(0))
 
 
 def nerf_train(config, scene, out_dir, pseudo, **kwargs):
