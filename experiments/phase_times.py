@@ -93,7 +93,7 @@ def measure(config, scene):
   Returns:
     dict: 'phases' {label: seconds}, 'rounds' [per round: steps, train_seconds,
     seconds_per_step (steady), psnr, val_psnr], 'gaussians' [counts at the cheap
-    evaluations, by stage], 'pseudo_views' (count, render seconds).
+    evaluations, by stage], 'pseudo_views' ({'views': count} of R1's pseudo-views).
   """
   clock = PhaseClock()
   current = {'stage': 'B'}
