@@ -27,10 +27,11 @@ from renerf_jax.datasets import load_scene
 
 
 class PhaseClock:
-  """Seconds per phase label, and the records of the cheap evaluations."""
+  """Seconds per phase label, the records of the cheap evaluations, and the stage ('B'
+  or 'R1') the phases being timed belong to."""
 
   def __init__(self):
-    self.seconds, self.evals = {}, []
+    self.seconds, self.evals, self.stage = {}, [], 'B'
 
   @contextlib.contextmanager
   def phase(self, label):
@@ -47,31 +48,31 @@ def count_gaussians(params):
   return None if active is None else int(np.sum(np.asarray(active)))
 
 
-def timed_backbone(backbone, clock, stage, test_scene):
+def timed_backbone(backbone, clock, test_scene):
   """`backbone` whose train / synthesize / evaluate / cheap evaluations add their wall
-  seconds to `clock` under stage()'s current label ('B' or 'R1'); an evaluation of a
+  seconds to `clock` under its current stage; an evaluation of a
   scene other than `test_scene` is the validation views' (renerf.validation_scene)."""
 
   def train(config, scene, out_dir, pseudo, **kw):
     inner = kw.get('eval_fn')
     if inner is not None:
       def eval_fn(params):
-        with clock.phase(f'{stage()} cheap evaluations'):
+        with clock.phase(f'{clock.stage} cheap evaluations'):
           psnr = inner(params)
-        clock.evals.append({'stage': stage(), 'gaussians': count_gaussians(params),
+        clock.evals.append({'stage': clock.stage, 'gaussians': count_gaussians(params),
                             'psnr': psnr})
         return psnr
       kw['eval_fn'] = eval_fn
-    with clock.phase(f'{stage()} training (steps, compile, cheap evaluations)'):
+    with clock.phase(f'{clock.stage} training (steps, compile, cheap evaluations)'):
       return backbone.train(config, scene, out_dir, pseudo, **kw)
 
   def synthesize(*args, **kw):
-    with clock.phase(f'{stage()} pseudo-views'):
+    with clock.phase(f'{clock.stage} pseudo-views'):
       return backbone.synthesize(*args, **kw)
 
   def evaluate(config, scene, params, **kw):
     which = 'test' if scene is test_scene else 'validation'
-    with clock.phase(f'{stage()} final evaluation ({which} views)'):
+    with clock.phase(f'{clock.stage} final evaluation ({which} views)'):
       return backbone.evaluate(config, scene, params, **kw)
 
   return dataclasses.replace(backbone, train=train, synthesize=synthesize,
@@ -96,14 +97,12 @@ def measure(config, scene):
     evaluations, by stage], 'pseudo_views' ({'views': count} of R1's pseudo-views).
   """
   clock = PhaseClock()
-  current = {'stage': 'B'}
-  backbone = timed_backbone(backbones.get_backbone(config), clock,
-                            lambda: current['stage'], scene)
+  backbone = timed_backbone(backbones.get_backbone(config), clock, scene)
   state = renerf.initial_state()
   rounds, pseudo = [], None
   with mock.patch.object(backbones, 'get_backbone', lambda cfg: backbone):
     for stage in ('B', 'R1'):
-      current['stage'] = stage
+      clock.stage = stage
       with clock.phase(f'{stage} round (all of it)'):
         state = renerf.round_step(config, scene, state)
       m, curve = state.metrics[-1], state.curves[-1]
