@@ -7,7 +7,11 @@ renerf_jax.uncertainty.signals along the test views (one render) and one pseudo-
 (--panel_view), and measures each U against B's per-pixel error on the test views
 (renerf_jax.uncertainty.quality): RGB squared error everywhere, and on the embedded
 procedural scene also the absolute z-depth error (its true depths are exact; the NDC
-'distance' is converted to z-depth first). The signals of a run are kept in
+'distance' is converted to z-depth first). With --views validation the signals are
+measured on the capture's validation views instead (Config.val_views): the choice of a
+mask signal for a table is made there, never on its test views. --baseline_from copies a
+finished B made with the same baseline config from another run directory instead of
+training it again. The signals of a run are kept in
 <out>/<name>/<scene>/seed<k>_signals.npz and its measures in seed<k>_quality.json
 (reused; --recompute redoes them).
 
@@ -20,6 +24,13 @@ error). Six scenes, two seeds, the hour-budget config:
 
   python -m experiments.uncertainty_quality --name uq_tiny \
     --scenes procedural fern orchids room trex fortress --seeds 0 1
+
+The grid's mask signal on garden's validation views, B from the paper-setting table:
+
+  python -m experiments.uncertainty_quality --name uq_grid_garden_val \
+    --out experiments/results/paper_table2_360 --config gin_configs/garden30.gin \
+    --data_dir ../shared/data/mipnerf360 --scenes garden --seeds 0 1 --views validation \
+    --baseline_from 'experiments/results/paper_table2_360/grid/{scene}/Re-Nerfing/seed{seed}'
 """
 import argparse
 import dataclasses
@@ -30,8 +41,10 @@ import time
 
 import numpy as np
 
+from experiments import sharing
 from experiments.tables import command_line, mean_std
-from renerf_jax import cli, figures, jit_cache, report, round_driver, rundir
+from renerf_jax import cli, figures, jit_cache, renerf, report, round_driver, rundir
+from renerf_jax.errors import ConfigError
 from renerf_jax.nerf import contraction
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import camera_rays, load_scene, ray_pool
@@ -61,6 +74,12 @@ def parser():
   p.add_argument('--out', default='experiments/results')
   p.add_argument('--panel_view', type=int, default=3, help='pseudo-view of the panel')
   p.add_argument('--recompute', action='store_true', help='redo cached signals')
+  p.add_argument('--views', choices=('test', 'validation'), default='test',
+                 help="the views U is measured on ('validation': Config.val_views, for "
+                 'choosing a signal without the test views)')
+  p.add_argument('--baseline_from', default=None,
+                 help="a finished run directory ('{scene}' and '{seed}' filled in) whose B "
+                 'was made with the same baseline config: copied instead of trained')
   return p
 
 
@@ -124,18 +143,29 @@ def run_one(args, root, scene_name, seed):
   scene = load_scene(config)
   run_dir = os.path.join(root, scene_name, f'seed{seed}')
   qpath, npath = run_dir + '_quality.json', run_dir + '_signals.npz'
+  measured = scene
+  if args.views == 'validation':
+    if not len(scene.val_idx):
+      raise ConfigError(f'--views validation: scene {scene_name!r} has no validation '
+                        'views (set Config.val_views)')
+    measured = renerf.validation_scene(scene)
   cli.check_run_dir(config, run_dir, create=True)
   if os.path.isfile(qpath) and os.path.isfile(npath) and not args.recompute:
     q = report.read_json(qpath)
-    if q.get('version') == SIGNALS_VERSION and rundir.is_done(rundir.round_dir(run_dir, 0)):
+    if (q.get('version') == SIGNALS_VERSION and q.get('views', 'test') == args.views
+        and rundir.is_done(rundir.round_dir(run_dir, 0))):
       print(f'{scene_name} seed{seed}: reused {qpath}', file=sys.stderr)
       return q
+  if args.baseline_from and not os.path.exists(rundir.round_dir(run_dir, 0)):
+    src = args.baseline_from.format(scene=scene_name, seed=seed)
+    sharing.copy_baseline(config, src, run_dir)
+    report.write_json(rundir.shared_baseline_path(run_dir), {'from': src})  # as tables
   state = round_driver.run_rounds(config, scene, run_dir, show_progress=False)
-  arrays, info = compute_run(config, scene, state.params, args.panel_view)
+  arrays, info = compute_run(config, measured, state.params, args.panel_view)
   with report.atomic_open(npath, 'wb') as f:
     np.savez_compressed(f, **arrays)
   round_s = float(state.metrics[0]['round_seconds'])
-  q = dict(info, version=SIGNALS_VERSION, scene=scene_name, seed=seed,
+  q = dict(info, version=SIGNALS_VERSION, scene=scene_name, seed=seed, views=args.views,
            keep_frac=config.mask_keep_frac, round_seconds=round_s,
            psnr=float(state.metrics[0]['psnr']),
            deform_log2_res=config.deform_log2_res, variants=measure(arrays, config.mask_keep_frac))
@@ -190,16 +220,16 @@ def summarize(runs):
   return rows, means, best, targets
 
 
-def markdown(name, rows, means, best, targets, keep_frac, invocations):
+def markdown(name, rows, means, best, targets, keep_frac, invocations, views='test'):
   f = lambda r, k, d=3: (f"{r[k]:.{d}f} +- {r[k + '_std']:.{d}f}" if k in r else '')
   lines = [f'# {name}', '', 'Uncertainty U of the baseline B against its per-pixel error on '
-           'the test views (renerf_jax.uncertainty.quality). AUSE: area between the '
+           f'the {views} views (renerf_jax.uncertainty.quality). AUSE: area between the '
            'sparsification curve and the oracle (lower is better); AURG: area between '
            'random and the curve (> 0 better than random); curves normalised by the mean '
            f'error of all pixels, removed fraction 0..0.99. Lift: mean error of the masked '
            f'pixels / of the kept ones at keep fraction {keep_frac}. Mean +- std over seeds. '
-           'Hessian s: the pass the variant needs (render s: the one render of the test '
-           'views that gives every variant, shared).', '',
+           'Hessian s: the pass the variant needs (render s: the one render of the '
+           f'{views} views that gives every variant, shared).', '',
            '| scene | variant | AUSE (RGB) | AURG (RGB) | lift | AUSE (depth) | AURG (depth) '
            '| Hessian rays | Hessian s | render s | B round s |', '|---|' * 1 + '---|' * 10]
   for r in rows:
@@ -251,7 +281,7 @@ def plot_curves(runs, scene, path):
   figures.save_figure(fig, path, dpi=100)
 
 
-def plot_panel(npz_path, variants, keep_frac, path):
+def plot_panel(npz_path, variants, keep_frac, path, views='test'):
   """Rows: pseudo-view | U | masked view per variant; test view | U | error (first)."""
   with np.load(npz_path) as z:
     a = dict(z)
@@ -266,7 +296,7 @@ def plot_panel(npz_path, variants, keep_frac, path):
   rows.append(side_by_side(np.clip(a['test_rgb'][0], 0., 1.), uncertainty_heatmap(u),
                            np.ones(u.shape)))
   rows[-1][:, -u.shape[1]:] = uncertainty_heatmap(a['err'][0])
-  titles.append(f'test view (B) | U = {variants[0]} | RGB error (quantiles)')
+  titles.append(f'{views} view (B) | U = {variants[0]} | RGB error (quantiles)')
   fig, axes = figures.subplots(len(rows), 1, figsize=(9, 2.6 * len(rows)))
   for ax, img, t in zip(axes[:, 0], rows, titles):
     ax.imshow(np.clip(img, 0., 1.), interpolation='nearest')
@@ -276,6 +306,7 @@ def plot_panel(npz_path, variants, keep_frac, path):
   figures.save_figure(fig, path, dpi=100)
 
 
+@cli.exit_on_error
 def main(argv=None):
   t0 = time.perf_counter()
   args = parser().parse_args(argv)
@@ -284,10 +315,12 @@ def main(argv=None):
   jobs = [(sc, s) for sc in args.scenes for s in args.seeds]
   bar = progress_bar(total=len(jobs), unit='run', desc='uncertainty quality')
   runs = []
-  for scene_name, seed in jobs:
-    runs.append(run_one(args, root, scene_name, seed))
-    bar.update(1)
-  bar.close()
+  try:
+    for scene_name, seed in jobs:
+      runs.append(run_one(args, root, scene_name, seed))
+      bar.update(1)
+  finally:  # An error's line then starts a line of its own.
+    bar.close()
   rows, means, best, targets = summarize(runs)
   keep_frac = runs[0]['keep_frac']
   command = command_line('experiments.uncertainty_quality', argv)
@@ -296,19 +329,20 @@ def main(argv=None):
   invocations = rundir.read_jsonl(log)
   report.write_json(os.path.join(args.out, args.name + '.json'), {
       'name': args.name, 'config': args.config, 'bindings': args.gin_bindings,
-      'scenes': args.scenes, 'seeds': args.seeds, 'variants': list(us.VARIANTS),
+      'scenes': args.scenes, 'seeds': args.seeds, 'views': args.views,
+      'variants': list(us.VARIANTS),
       'rows': rows, 'means': means, 'best': best, 'targets': targets,
       'keep_frac': keep_frac, 'fractions': uq.DEFAULT_FRACTIONS.tolist(),
       'runs': [{k: v for k, v in r.items() if k != 'variants'} for r in runs],
       'command': command, 'invocations': invocations})
-  md = markdown(args.name, rows, means, best, targets, keep_frac, invocations)
+  md = markdown(args.name, rows, means, best, targets, keep_frac, invocations, args.views)
   report.write_markdown(os.path.join(args.out, args.name + '.md'), md)
   panel_variants = [best] + (['laplace'] if best != 'laplace' else [])
   for sc in dict.fromkeys(args.scenes):
     plot_curves(runs, sc, os.path.join(args.out, f'{args.name}_{sc}.png'))
     seed = min(r['seed'] for r in runs if r['scene'] == sc)
     plot_panel(os.path.join(root, sc, f'seed{seed}_signals.npz'), panel_variants,
-               keep_frac, os.path.join(args.out, f'{args.name}_{sc}_panel.png'))
+               keep_frac, os.path.join(args.out, f'{args.name}_{sc}_panel.png'), args.views)
   print(md)
   print(json.dumps({'best': best, 'targets': targets}))
 

@@ -135,9 +135,9 @@ TINY = ['Config.procedural_size = (32, 40)', 'Config.image_downsample = 1',
 
 
 def test_script_end_to_end_on_the_procedural_scene(tmp_path):
+  bindings = [f'--gin_bindings={b}' for b in TINY + ['Config.val_views = 2']]
   cmd = [sys.executable, '-m', 'experiments.uncertainty_quality', '--name', 'uq', '--out',
-         str(tmp_path), '--scenes', 'procedural', '--seeds', '0'] + [
-             f'--gin_bindings={b}' for b in TINY]
+         str(tmp_path), '--scenes', 'procedural', '--seeds', '0'] + bindings
   res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
                        check=False)
   assert res.returncode == 0, res.stderr[-3000:]
@@ -153,3 +153,30 @@ def test_script_end_to_end_on_the_procedural_scene(tmp_path):
   res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600,
                        check=False)
   assert res.returncode == 0 and 'reused' in res.stderr + res.stdout
+  test_views = np.load(tmp_path / 'uq' / 'procedural' / 'seed0_signals.npz')['err'].shape[0]
+  # On the validation views, with B copied from the first run instead of trained.
+  val = [sys.executable, '-m', 'experiments.uncertainty_quality', '--name', 'uq_val',
+         '--out', str(tmp_path), '--scenes', 'procedural', '--seeds', '0', '--views',
+         'validation', '--baseline_from', str(tmp_path / 'uq' / '{scene}' / 'seed{seed}')]
+  res = subprocess.run(val + bindings, cwd=REPO, capture_output=True, text=True,
+                       timeout=600, check=False)
+  assert res.returncode == 0, res.stderr[-3000:]
+  run = tmp_path / 'uq_val' / 'procedural' / 'seed0'
+  shared = json.loads((run / 'shared_baseline.json').read_text())
+  assert shared['from'] == str(tmp_path / 'uq' / 'procedural' / 'seed0')
+  assert np.load(str(run) + '_signals.npz')['err'].shape[0] == 2 != test_views
+  out = json.loads((tmp_path / 'uq_val.json').read_text())
+  assert out['views'] == 'validation' and out['runs'][0]['views'] == 'validation'
+  assert 'the validation views' in (tmp_path / 'uq_val.md').read_text()
+
+
+def test_script_validation_views_refused_without_any(tmp_path, capsys):
+  from experiments import uncertainty_quality  # pylint: disable=g-import-not-at-top
+  with pytest.raises(SystemExit) as e:
+    uncertainty_quality.main(['--name', 'uq', '--out', str(tmp_path), '--scenes',
+                              'procedural', '--seeds', '0', '--views', 'validation'] +
+                             [f'--gin_bindings={b}' for b in TINY])
+  assert e.value.code == 2
+  err = capsys.readouterr().err.strip().splitlines()
+  assert err[-1:] == ["error: --views validation: scene 'procedural' has no validation views "
+                 '(set Config.val_views)']
