@@ -9,7 +9,7 @@ table, writes eval_rounds.json/.md and plots error_vs_time.png in the run direct
 import os
 import sys
 
-from renerf_jax import cli, distributed, figures, report, rundir
+from renerf_jax import auto_rounds, cli, distributed, figures, report, rundir
 from renerf_jax.backbones import get_backbone
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import initial_state, round_config, rounds_table
@@ -51,7 +51,9 @@ def main(argv=None):
   scene = load_scene(config)
   state = initial_state()
   metrics = []
-  for r in range(config.num_rounds + 1):
+  for r in range(auto_rounds.max_rounds(config) + 1):
+    if r > 0 and auto_rounds.stops_after(config, state.metrics):
+      break  # 'auto': the run discarded round r - 1 and trained no further round.
     rdir = rundir.round_dir(run_dir, r)
     if not rundir.is_done(rdir):
       print(f'round {r} is not finished in {run_dir}; evaluating rounds 0..{r - 1}',

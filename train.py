@@ -5,9 +5,24 @@ On several machines: the same command on each, with --coordinator_address,
 """
 import sys
 
-from renerf_jax import cli, distributed, report, round_driver, rundir
+from renerf_jax import auto_rounds, cli, distributed, report, round_driver, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.renerf import check_rounds_config, deltas_vs_baseline, rounds_table
+
+
+def auto_decision_lines(config, metrics):
+  """With Config.num_rounds = 'auto': each round's decision and the model the run
+  keeps (none otherwise)."""
+  if not auto_rounds.is_auto(config):
+    return []
+  lines = [m['auto']['line'] for m in metrics[1:] if m.get('auto')]
+  sel = auto_rounds.selected_round(metrics)
+  last = metrics[-1]
+  if len(metrics) - 1 == config.auto_max_rounds and (last.get('auto') or {}).get('take'):
+    lines.append(f'no round after round {len(metrics) - 1}: Config.auto_max_rounds = '
+                 f'{config.auto_max_rounds}')
+  return lines + [f"the run keeps {'B' if sel == 0 else f'R{sel}'} (round {sel}; "
+                  'auto_rounds.selected_round)']
 
 
 @cli.exit_on_error
@@ -28,16 +43,19 @@ def main(argv=None):
     return
   table = rounds_table(state.metrics, control)
   json_path, md_path = rundir.rounds_table_paths(run_dir)
-  report.write_json(json_path, list(state.metrics))
+  report.write_json(json_path, list(state.metrics))  # With 'auto': each decision too.
   deltas = deltas_vs_baseline(state.metrics, control)
-  report.write_markdown(md_path, table + '\n' + ''.join(f'\n{d}\n' for d in deltas))
+  decisions = auto_decision_lines(config, state.metrics)
+  report.write_markdown(md_path, table + '\n' + ''.join(f'\n{d}\n' for d in decisions + deltas))
   rows = [('B', rundir.round_dir(run_dir, 0))]
   if control is not None:
     rows.append(('control', rundir.round_dir(round_driver.control_run_dir(config, run_dir),
                                              0)))
-  rows += [(f'R{r}', rundir.round_dir(run_dir, r)) for r in range(1, config.num_rounds + 1)]
+  rows += [(f'R{r}', rundir.round_dir(run_dir, r)) for r in range(1, len(state.metrics))]
   round_driver.save_comparison(run_dir, scene, rows)
   print(table)
+  for line in decisions:
+    print(line)
   for line in deltas:
     print(line)
   print('the test view farthest from the training cameras, photo then each row: '

@@ -28,6 +28,8 @@ READERS = {'both': 'both', 'nerf': 'NeRF', 'gaussians': 'Gaussians'}
 
 def type_text(annotation) -> str:
   """int, float, str, bool; (int, int), (str, ...), ((str, float), ...) for tuples."""
+  if typing.get_origin(annotation) is typing.Union:
+    return ' or '.join(type_text(a) for a in typing.get_args(annotation))
   if typing.get_origin(annotation) not in (tuple, typing.Tuple):
     return annotation.__name__
   args = typing.get_args(annotation)

@@ -284,6 +284,14 @@ def _targets_problem(v):
   return f"one of {', '.join(PSEUDO_TARGETS)} or a '+' combination of them, each once"
 
 
+def _num_rounds_problem(v):
+  ok = (v == 'auto' if isinstance(v, str) else
+        isinstance(v, int) and not isinstance(v, bool) and 0 <= v < INT_LIMIT)
+  return None if ok else "an integer >= 0 or 'auto'"
+
+
+NUM_ROUNDS = Rule(_num_rounds_problem, "integer >= 0, or 'auto' (decided on validation "
+                  'views)')
 MIN_NEAR = Rule(_min_near_problem, '(scene name, near > 0) pairs')
 BOX = Rule(_box_problem, '(low corner, high corner), low < high on each axis')
 FACTORS = Rule(_factors_problem, "a preset ('2x' .. '11x') or factors in (0, 1), "

@@ -19,7 +19,7 @@ from typing import Any, Callable, Optional, Tuple
 import flax
 import numpy as np
 
-from renerf_jax import backbones, fit, metrics, report
+from renerf_jax import auto_rounds, backbones, fit, metrics, report
 from renerf_jax.errors import ConfigError, DataError
 from renerf_jax.pseudo_views import PseudoViews, pseudo_view_poses
 
@@ -119,6 +119,9 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
     val = backbone.evaluate(cfg, validation_scene(scene), result.state.params,
                             show_progress=False)
     metrics.update({f'val_{k}': v for k, v in val.mean.items()})
+    metrics['val_psnr_views'] = [float(v['psnr']) for v in val.per_image]
+  if r > 0 and auto_rounds.is_auto(config):  # Keep D, or B? (validation views only)
+    metrics['auto'] = auto_rounds.round_decision(config, state.metrics[-1], metrics)
   return RoundState(params=result.state.params, pseudo=pseudo, round_index=r,
                     metrics=state.metrics + (metrics,),
                     curves=state.curves + (result.curve,), seconds=seconds)
@@ -137,7 +140,8 @@ def check_rounds_config(config, scene):
   if config.backbone == 'gaussians' and config.gs_init == 'sfm' and scene.points is None:
     raise DataError(f"scene {scene.name!r}: Config.gs_init='sfm' needs SfM points (a "
                     "COLMAP model's points3D or a transforms.json ply_file_path)")
-  if config.num_rounds > 0:
+  auto_rounds.check_auto(config, scene)
+  if auto_rounds.max_rounds(config) > 0:
     pseudo_view_poses(config, scene)
     if config.seed_control and config.renerf_init != 'reset':
       raise ConfigError(f'Config.seed_control trains D from scratch at D\'s seed; with '
@@ -151,10 +155,11 @@ def check_rounds_config(config, scene):
 
 
 def run_rounds(config, scene, show_progress: bool = False) -> RoundState:
-  """Baseline plus config.num_rounds rounds in memory (round_driver.run_rounds: on disk)."""
+  """Baseline plus config.num_rounds rounds in memory (round_driver.run_rounds: on disk);
+  with num_rounds 'auto', until a round is discarded (auto_rounds.stops_after)."""
   check_rounds_config(config, scene)
-  state = initial_state()
-  for _ in range(config.num_rounds + 1):
+  state = round_step(config, scene, initial_state(), show_progress)
+  while not auto_rounds.stops_after(config, state.metrics):
     state = round_step(config, scene, state, show_progress)
   return state
 

@@ -16,13 +16,14 @@ reads what is on disk; process 0 alone writes. Evaluation, pseudo-view synthesis
 uncertainty return arrays and dicts; they are written here (and by eval.py) only.
 """
 import os
+import sys
 from typing import Callable, Optional, Sequence
 
 import numpy as np
 from flax import serialization
 
-from renerf_jax import (backbones, checkpoint_io, distributed, figures, pseudo_views, renerf,
-                        report, rundir)
+from renerf_jax import (auto_rounds, backbones, checkpoint_io, distributed, figures,
+                        pseudo_views, renerf, report, rundir)
 from renerf_jax.errors import RunDirError
 from renerf_jax.evaluation import Evaluation
 from renerf_jax.pseudo_views import PseudoViews
@@ -175,7 +176,8 @@ def load_round(config, rdir, state: renerf.RoundState) -> renerf.RoundState:
 def run_rounds(config, scene, run_dir, show_progress=True,
                synthesize_fn: Optional[Callable] = None,
                label: Optional[str] = None) -> renerf.RoundState:
-  """Baseline plus config.num_rounds rounds in run_dir, resuming what is there.
+  """Baseline plus config.num_rounds rounds in run_dir, resuming what is there (with
+  num_rounds 'auto': until a round is discarded, renerf_jax/auto_rounds.py).
 
   Args:
     config, scene: Config and Scene. run_dir: the run directory.
@@ -191,7 +193,9 @@ def run_rounds(config, scene, run_dir, show_progress=True,
   backbone = backbones.get_backbone(config)
   state = renerf.initial_state()
   distributed.sync('run_rounds')  # Every process sees the same directory from here on.
-  for r in range(config.num_rounds + 1):
+  for r in range(auto_rounds.max_rounds(config) + 1):
+    if r > 0 and auto_rounds.stops_after(config, state.metrics):
+      break  # 'auto': the last round was discarded.
     rdir = rundir.round_dir(run_dir, r)
     if rundir.is_done(rdir):
       state = load_round(config, rdir, state)
@@ -208,6 +212,8 @@ def run_rounds(config, scene, run_dir, show_progress=True,
             eval_dir, lambda cfg, sc, params: backbone.evaluate(cfg, sc, params,
                                                                 show_progress=False)))
     save_round(rdir, state, backbone.export)
+    if show_progress and state.metrics[-1].get('auto'):
+      print(state.metrics[-1]['auto']['line'], file=sys.stderr)  # As it is decided.
   return state
 
 

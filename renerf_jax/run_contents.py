@@ -7,7 +7,7 @@ from typing import Optional
 
 from flax import serialization
 
-from renerf_jax import rundir
+from renerf_jax import auto_rounds, report, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.round_driver import load_pseudo_views, load_round_params, params_template
 from renerf_jax.run_config import load_run_config
@@ -25,6 +25,8 @@ class RoundInfo:
   index: int  # 0: the baseline B.
   done: bool  # Finished (params.msgpack + DONE), else training (checkpoint or nothing).
   step: Optional[int]  # Training step of the parameters there (None: none yet).
+  # Config.num_rounds = 'auto': the finished round's decision line (auto_rounds.decide).
+  decision: Optional[str] = None
 
   @property
   def label(self) -> str:
@@ -35,11 +37,22 @@ class RoundInfo:
 
 def list_rounds(config, run_dir):
   """[RoundInfo] of rounds 0..config.num_rounds that have parameters to show: finished
-  rounds and the first unfinished one if it has a checkpoint."""
-  out = []
-  for r in range(config.num_rounds + 1):
-    if rundir.is_done(rundir.round_dir(run_dir, r)):
-      out.append(RoundInfo(r, True, None))
+  rounds and the first unfinished one if it has a checkpoint (with num_rounds 'auto':
+  none after a discarded round)."""
+  out, decided = [], []
+  for r in range(auto_rounds.max_rounds(config) + 1):
+    if r > 0 and auto_rounds.stops_after(config, decided):
+      break  # 'auto': the previous round was discarded; no later round trains.
+    rdir = rundir.round_dir(run_dir, r)
+    if rundir.is_done(rdir):
+      m = {'round': r}
+      if auto_rounds.is_auto(config) and r > 0:
+        try:
+          m = report.read_json(rundir.result_path(rdir))['metrics']
+        except (OSError, ValueError, KeyError):
+          pass  # Shown without its decision.
+      decided.append(m)
+      out.append(RoundInfo(r, True, None, (m.get('auto') or {}).get('line')))
       continue
     ckpts = rundir.list_checkpoints(rundir.round_checkpoints_dir(run_dir, r))
     if ckpts:

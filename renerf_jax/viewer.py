@@ -118,6 +118,7 @@ class Viewer(FrameRenderer):
     self.gui_camera = gui.add_dropdown('Camera', names, initial_value=names[0])
     self.gui_go = gui.add_button('Go to camera')
     self.gui_status = gui.add_markdown('')
+    self.gui_decisions = gui.add_markdown(decisions_text(self.rounds))
     for h in (self.gui_model, self.gui_compare, self.gui_split, self.gui_layer,
               self.gui_side):
       h.on_update(lambda _: self._request_all())
@@ -254,6 +255,7 @@ class Viewer(FrameRenderer):
         self.gui_model.value = labels[-1]
     else:
       self.rounds = rounds
+    self.gui_decisions.content = decisions_text(rounds)
     for ri in rounds:  # A round that finished since: its final params replace the last
       if ri.done and ri.index in old and not old[ri.index].done:  # checkpoint's.
         with self._params_lock:
@@ -277,6 +279,12 @@ class Viewer(FrameRenderer):
       st.closed = True
       st.wake.set()
     self.server.stop()
+
+
+def decisions_text(rounds) -> str:
+  """The viewer's account of Config.num_rounds = 'auto': each finished round's decision
+  (empty for a run without them)."""
+  return '  \n'.join(ri.decision for ri in rounds if ri.decision)
 
 
 @dataclasses.dataclass(eq=False)

@@ -97,6 +97,7 @@ RULE_INSIDE = {
             lambda v: ','.join(repr(x) for x in v))),
     'pseudo_targets': st.permutations(PSEUDO_TARGETS).flatmap(
         lambda p: st.integers(1, len(p)).map(lambda n: '+'.join(p[:n]))),
+    'num_rounds': st.one_of(st.just('auto'), st.integers(0, 2**31 - 1)),
 }
 RULE_OUTSIDE = {
     'llff_min_near': st.sampled_from([(('fern', -1.),), (('fern', 0.),), (('fern',),),
@@ -108,6 +109,9 @@ RULE_OUTSIDE = {
     'interp_factors': st.sampled_from(['', '0.5,2', '0', '1', 'x', '12x', 3, None]),
     'pseudo_targets': st.sampled_from(['', 'interp+interp', 'views', 'interp+', 'Test', 3,
                                        None]),
+    'num_rounds': st.one_of(st.sampled_from(['Auto', 'auto ', '', '2', True, False, 1.0,
+                                             None, ('auto',), float('nan')]),
+                            st.integers(-2**62, -1), st.integers(2**31, 2**62)),
 }
 
 
@@ -222,8 +226,9 @@ def test_every_field_declares_a_domain_its_default_lies_in():
 def test_the_issues_values_are_refused_in_one_line():
   """Issue 63's values, bound on gin_configs/demo.gin: each refused naming the field."""
   for binding, line in [
-      ('Config.num_rounds = -1', 'Config.num_rounds=-1 must be >= 0'),
-      ("Config.num_rounds = 'auto'", "Config.num_rounds='auto' must be an integer >= 0"),
+      ('Config.num_rounds = -1', "Config.num_rounds=-1 must be an integer >= 0 or 'auto'"),
+      ("Config.num_rounds = 'always'",
+       "Config.num_rounds='always' must be an integer >= 0 or 'auto'"),
       ('Config.lr_init = -1.0', 'Config.lr_init=-1.0 must be > 0'),
       ('Config.n_input_views = 0', 'Config.n_input_views=0 must be >= 1'),
       ('Config.image_downsample = 0', 'Config.image_downsample=0 must be >= 1'),
@@ -303,7 +308,7 @@ def _one_bad_value(f):
   unknown choice, a word for a bool, a bare number for a tuple."""
   domain, (kind, length) = f.metadata['domain'], shape_of(f.type)
   if length is not None or (domain is not None and domain.rule is not None):
-    return 3 if f.name != 'interp_factors' else '0.5,2'
+    return {'interp_factors': '0.5,2', 'num_rounds': 'always'}.get(f.name, 3)
   if kind is bool:
     return 'yes'
   if kind is str:
@@ -335,14 +340,17 @@ def test_train_refuses_one_bad_value_per_field_in_one_line(tmp_path, capsys):
                 for p in existing.iterdir()) == before
 
 
-def test_train_py_refuses_a_mode_that_does_not_exist_yet(tmp_path):
-  """A real train.py: num_rounds = 'auto' (issue 64 adds it) is one line, exit 2."""
+def test_train_py_refuses_auto_rounds_without_validation_views(tmp_path):
+  """A real train.py: num_rounds = 'auto' decides on validation views, and demo.gin's
+  scene has none: one line, exit 2, no run directory."""
   run_dir = tmp_path / 'run'
   res = subprocess.run([sys.executable, 'train.py', '--gin_configs=gin_configs/demo.gin',
                         "--gin_bindings=Config.num_rounds = 'auto'", f'--run_dir={run_dir}'],
                        cwd=REPO, capture_output=True, text=True, timeout=300, check=False)
   assert res.returncode == 2, res.stderr[-2000:]
-  assert res.stderr == "error: Config.num_rounds='auto' must be an integer >= 0\n"
+  assert res.stderr == ("error: Config.num_rounds='auto' decides on validation views, and "
+                        "scene 'orbit' has 0 (Config.val_views=0); set Config.val_views "
+                        '>= 2 or an integer Config.num_rounds\n')
   assert res.stdout == '' and not run_dir.exists()
 
 
@@ -360,5 +368,6 @@ def test_docs_list_every_fields_domain_as_declared():
       'docs/configs.md is stale: run python docs/make_configs.py')
   rows = [line for line in block.splitlines() if line.startswith('| `')]
   assert [r.split('`')[1] for r in rows] == [f.name for f in FIELDS]
-  assert "| `num_rounds` | renerf | both | int | >= 0 |" in rows
+  assert ("| `num_rounds` | renerf | both | int or str | integer >= 0, or 'auto' (decided "
+          'on validation views) |') in rows
   assert "| `mask_threshold` | renerf | both | float | -1 or >= 0 |" in rows

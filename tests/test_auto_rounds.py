@@ -1,0 +1,249 @@
+"""Config.num_rounds = 'auto' (renerf_jax/auto_rounds.py): the decision on validation
+views, its extreme inputs, and the rounds it trains in memory and on disk."""
+import json
+import math
+import types
+
+import numpy as np
+import pytest
+
+from renerf_jax import auto_rounds, backbones, evaluation, fit, renerf, round_driver, rundir
+from renerf_jax.configs import load_config
+from renerf_jax.datasets import load_scene
+from renerf_jax.errors import ConfigError
+from renerf_jax.pseudo_views import PseudoViews
+
+BINDINGS = ["Config.dataset_loader = 'procedural'", 'Config.procedural_size = (32, 40)',
+            'Config.procedural_views = 17', 'Config.n_input_views = 3',
+            'Config.val_views = 3', 'Config.max_steps = 4', 'Config.anneal_nearfar_steps = 1',
+            'Config.pseudo_until_frac = 0.5',
+            "Config.lpips_nets = ('alex',)", "Config.num_rounds = 'auto'"]
+
+
+# ------------------------------------------------------------------------- the decision
+
+
+def test_a_gain_above_its_standard_error_is_kept():
+  d = auto_rounds.decide(1, [20., 21., 22., 23.], [20.5, 21.4, 22.6, 23.5], 1.)
+  gains = np.array([0.5, 0.4, 0.6, 0.5])
+  assert d['take'] and d['round'] == 1 and d['views'] == 4
+  assert d['gain'] == pytest.approx(gains.mean())
+  assert d['se'] == pytest.approx(gains.std(ddof=1) / 2.)
+  assert d['line'] == ('round 1 kept: validation gain +0.50 +- 0.04 dB (4 views), above 1 '
+                       'standard errors')
+
+
+def test_a_gain_within_its_noise_or_a_loss_is_discarded():
+  noisy = auto_rounds.decide(2, [20., 21., 22.], [21., 20.5, 22.2], 1.)
+  assert not noisy['take'] and noisy['gain'] > 0. and noisy['gain'] < noisy['se']
+  assert noisy['line'].startswith('round 2 discarded, the run keeps round 1: validation '
+                                  'gain +0.23 +- ')
+  assert noisy['line'].endswith('(3 views), within 1 standard errors')
+  loss = auto_rounds.decide(1, [20., 21.], [19., 20.], 0.)
+  assert not loss['take'] and loss['gain'] == -1.
+  assert loss['line'] == ('round 1 discarded, the run keeps B: validation gain -1.00 +- '
+                          '0.00 dB (2 views), not above 0')
+  # Equal renders: no gain, discarded whatever the threshold.
+  assert not auto_rounds.decide(1, [20., 20.], [20., 20.], 0.)['take']
+
+
+def test_the_threshold_is_a_multiple_of_the_standard_error():
+  prev, cand = [20., 21., 22., 23.], [20.3, 21.5, 22.2, 23.4]  # mean 0.35, se 0.065
+  se = auto_rounds.decide(1, prev, cand, 0.)['se']
+  k_edge = 0.35 / se
+  assert auto_rounds.decide(1, prev, cand, k_edge * 0.99)['take']
+  assert not auto_rounds.decide(1, prev, cand, k_edge * 1.01)['take']
+  # A constant gain has no spread: any positive gain exceeds any multiple of 0.
+  d = auto_rounds.decide(1, [20., 21.], [20.1, 21.1], 1e9)
+  assert d['take'] and d['se'] == pytest.approx(0., abs=1e-12)
+
+
+def test_non_finite_psnrs():
+  nan, inf = float('nan'), float('inf')
+  d = auto_rounds.decide(1, [20., 21.], [nan, 25.], 0.)
+  assert not d['take'] and 'NaN' in d['line'] and math.isnan(d['gain'])
+  d = auto_rounds.decide(1, [nan, 21.], [20., 21.], 0.)
+  assert d['take'] and d['line'] == 'round 1 kept: a validation PSNR of B is NaN'
+  # Exact renders (PSNR inf): both exact counts as no change, one exact as a gain or loss.
+  d = auto_rounds.decide(1, [inf, 20.], [inf, 21.], 0.)
+  assert d['take'] and d['gain'] == 0.5 and np.isfinite(d['se'])
+  assert auto_rounds.decide(1, [20., 20.], [inf, 20.], 1.)['take']
+  d = auto_rounds.decide(1, [inf, 20.], [30., 20.], 0.)
+  assert not d['take'] and d['gain'] == -inf
+
+
+def test_bad_shapes_are_refused():
+  for prev, cand in [([20.], [21.]), ([20., 21.], [20.]), ([], []),
+                     ([[20., 21.]], [[20., 21.]])]:
+    with pytest.raises(ValueError, match='need two equal lists'):
+      auto_rounds.decide(1, prev, cand, 1.)
+
+
+def test_selected_round_and_stopping():
+  kept = lambda r: {'round': r, 'auto': {'take': True}}
+  dropped = lambda r: {'round': r, 'auto': {'take': False}}
+  assert auto_rounds.selected_round([{'round': 0}]) == 0
+  assert auto_rounds.selected_round([{'round': 0}, kept(1), kept(2)]) == 2
+  assert auto_rounds.selected_round([{'round': 0}, kept(1), dropped(2)]) == 1
+  assert auto_rounds.selected_round([{'round': 0}, dropped(1)]) == 0
+  assert auto_rounds.selected_round([{'round': 0}, {'round': 1}]) == 1  # integer rounds
+  cfg = types.SimpleNamespace(num_rounds='auto', auto_max_rounds=2)
+  assert not auto_rounds.stops_after(cfg, [{'round': 0}])
+  assert not auto_rounds.stops_after(cfg, [{'round': 0}, kept(1)])
+  assert auto_rounds.stops_after(cfg, [{'round': 0}, dropped(1)])
+  assert auto_rounds.stops_after(cfg, [{'round': 0}, kept(1), kept(2)])
+  fixed = types.SimpleNamespace(num_rounds=1, auto_max_rounds=5)
+  assert auto_rounds.max_rounds(fixed) == 1 and auto_rounds.max_rounds(cfg) == 2
+  assert auto_rounds.stops_after(fixed, [{'round': 0}, {'round': 1}])
+
+
+def test_auto_needs_two_validation_views():
+  config = load_config(['demo_llff.gin'], BINDINGS + ['Config.val_views = 1'])
+  with pytest.raises(ConfigError) as e:
+    renerf.check_rounds_config(config, load_scene(config))
+  assert str(e.value) == ("Config.num_rounds='auto' decides on validation views, and scene "
+                          "'procedural' has 1 (Config.val_views=1); set Config.val_views >= "
+                          '2 or an integer Config.num_rounds')
+
+
+def test_num_rounds_domain():
+  assert load_config(['demo_llff.gin'], BINDINGS).num_rounds == 'auto'
+  for bad in ["'Auto'", "'2'", '-1', '1.0', 'True']:
+    with pytest.raises(ConfigError) as e:
+      load_config(['demo_llff.gin'], [f'Config.num_rounds = {bad}'])
+    assert str(e.value).endswith("must be an integer >= 0 or 'auto'"), str(e.value)
+
+
+# ------------------------------------------------------------- rounds with a fake model
+
+
+def fake_backbone(val_psnrs, calls):
+  """A backbone whose round r's model scores val_psnrs[r] (per view) on the validation
+  views and 17 dB on the test views; `calls` counts its trainings."""
+
+  def train(config, scene, out_dir, pseudo, **kw):
+    del scene, out_dir, pseudo, kw
+    r = config.seed // 1000  # renerf.round_config: D's seed is B's + 1000 r.
+    calls.append(r)
+    return fit.TrainResult(state=types.SimpleNamespace(
+        params={'round': np.array([r], np.int32)}, nan_skips=0), train_seconds=1.,
+                           curve=[])
+
+  def synthesize(config, scene, params, show_progress=False):
+    h, w = scene.height, scene.width
+    return PseudoViews(images=np.zeros((2, h, w, 3), np.float32),
+                       poses=np.zeros((2, 3, 4), np.float32),
+                       masks=np.ones((2, h, w), np.float32),
+                       uncertainty=np.zeros((2, h, w), np.float32)), {'seconds': 0.5}, {}
+
+  def evaluate(config, scene, params, show_progress=False):
+    r = int(params['round'][0])
+    is_val = np.array_equal(scene.test_idx, VAL_IDX[0])
+    views = val_psnrs[r] if is_val else [17.] * len(scene.test_idx)
+    n, h, w = len(views), scene.height, scene.width
+    return evaluation.Evaluation(
+        per_image=[{'name': f'test_{i:03d}', 'psnr': v} for i, v in enumerate(views)],
+        mean={'psnr': float(np.mean(views))}, images=np.zeros((n, h, w, 3), np.float32),
+        distances=np.zeros((n, h, w), np.float32), columns=(('name', 'view'), ('psnr', 'PSNR')))
+
+  return backbones.Backbone(
+      name='fake', init_params=lambda cfg: {'round': np.zeros(1, np.int32)}, train=train,
+      synthesize=synthesize, cheap_eval_fn=lambda cfg, sc: None, evaluate=evaluate,
+      render_views=None)
+
+
+VAL_IDX = [None]
+GAINS = [[20., 21., 22.], [20.6, 21.5, 22.7], [21.2, 22.1, 23.2], [21.3, 22.0, 23.3]]
+
+
+def _scene_and_config(extra=()):
+  config = load_config(['demo_llff.gin'], BINDINGS + list(extra))
+  scene = load_scene(config)
+  VAL_IDX[0] = np.asarray(scene.val_idx)
+  return config, scene
+
+
+def test_in_memory_a_scene_that_says_go_trains_until_a_round_stops_paying(monkeypatch):
+  config, scene = _scene_and_config(['Config.auto_max_rounds = 5'])
+  calls = []
+  monkeypatch.setattr(backbones, 'get_backbone', lambda cfg: fake_backbone(GAINS, calls))
+  state = renerf.run_rounds(config, scene)
+  # R1 and R2 gain ~0.6 dB on every view; R3 moves by +0.1, -0.1, +0.1: within its noise.
+  assert calls == [0, 1, 2, 3]
+  assert [m['auto']['take'] for m in state.metrics[1:]] == [True, True, False]
+  assert auto_rounds.selected_round(state.metrics) == 2
+  assert state.metrics[1]['val_psnr_views'] == GAINS[1]
+  again = renerf.run_rounds(config, scene)  # Deterministic for a seed.
+  assert [m['auto'] for m in again.metrics[1:]] == [m['auto'] for m in state.metrics[1:]]
+
+
+def test_in_memory_a_scene_that_says_stop_trains_no_further_round(monkeypatch):
+  config, scene = _scene_and_config()
+  calls = []
+  losing = [GAINS[0], [19.9, 21.2, 21.7]]
+  monkeypatch.setattr(backbones, 'get_backbone', lambda cfg: fake_backbone(losing, calls))
+  state = renerf.run_rounds(config, scene)
+  assert calls == [0, 1] and len(state.metrics) == 2
+  assert not state.metrics[1]['auto']['take']
+  assert auto_rounds.selected_round(state.metrics) == 0
+
+
+def test_auto_max_rounds_caps_the_rounds(monkeypatch):
+  config, scene = _scene_and_config(['Config.auto_max_rounds = 2'])
+  calls = []
+  monkeypatch.setattr(backbones, 'get_backbone', lambda cfg: fake_backbone(GAINS, calls))
+  state = renerf.run_rounds(config, scene)
+  assert calls == [0, 1, 2] and auto_rounds.selected_round(state.metrics) == 2
+
+
+def test_on_disk_the_decisions_resume_and_nothing_trains_again(tmp_path, monkeypatch):
+  from renerf_jax import run_contents  # pylint: disable=g-import-not-at-top
+  config, scene = _scene_and_config(['Config.auto_max_rounds = 5'])
+  calls = []
+  monkeypatch.setattr(backbones, 'get_backbone', lambda cfg: fake_backbone(GAINS, calls))
+  run = str(tmp_path / 'run')
+  state = round_driver.run_rounds(config, scene, run, show_progress=False)
+  assert calls == [0, 1, 2, 3]
+  assert not rundir.is_done(rundir.round_dir(run, 4))
+  again = round_driver.run_rounds(config, scene, run, show_progress=False)
+  assert calls == [0, 1, 2, 3]  # Read back, decisions included: nothing retrained.
+  assert [m.get('auto') for m in again.metrics] == [m.get('auto') for m in state.metrics]
+  assert again.metrics[3]['auto']['take'] is False
+  rounds = run_contents.list_rounds(config, run)
+  assert [r.index for r in rounds] == [0, 1, 2, 3]
+  assert rounds[0].decision is None
+  assert rounds[3].decision.startswith('round 3 discarded, the run keeps round 2: ')
+
+
+def test_train_and_eval_py_with_auto_rounds_end_to_end(tmp_path, capsys):
+  """A real (tiny) NeRF through train.py: a threshold no gain can pass discards R1, so the
+  run trains B and R1, keeps B, says so per round, writes the decision into rounds.json;
+  a second train.py resumes and trains nothing; eval.py stops where the run stopped."""
+  import eval as eval_py  # pylint: disable=g-import-not-at-top
+  import train  # pylint: disable=g-import-not-at-top
+  from test_uncertainty_quality import TINY  # pylint: disable=g-import-not-at-top
+  from experiments.uncertainty_quality import PROCEDURAL  # pylint: disable=g-import-not-at-top
+  run = tmp_path / 'run'
+  argv = ['--gin_configs=experiments/configs/table_tiny.gin', f'--run_dir={run}'] + [
+      f'--gin_bindings={b}' for b in PROCEDURAL + TINY + [
+          'Config.val_views = 2', "Config.num_rounds = 'auto'", 'Config.auto_min_gain_se = 1e9',
+          'Config.auto_max_rounds = 3']]
+  train.main(argv)
+  out = capsys.readouterr()
+  lines = [l for l in out.out.splitlines() if l.startswith(('round 1 ', 'the run keeps'))]
+  assert lines[0].startswith('round 1 discarded, the run keeps B: validation gain ')
+  assert lines[1] == 'the run keeps B (round 0; auto_rounds.selected_round)'
+  assert lines[0] in out.err  # Printed as it was decided, too.
+  rounds = json.loads((run / 'rounds.json').read_text())
+  assert [m['round'] for m in rounds] == [0, 1] and rounds[1]['auto']['take'] is False
+  assert len(rounds[0]['val_psnr_views']) == 2 and 'auto' not in rounds[0]
+  assert not (run / 'round_2').exists()
+  assert lines[0] in (run / 'rounds.md').read_text()
+  before = (run / 'round_1' / 'result.json').stat().st_mtime_ns
+  train.main(argv)  # Resumed: both rounds read back, nothing trained again.
+  assert lines[0] in capsys.readouterr().out
+  assert (run / 'round_1' / 'result.json').stat().st_mtime_ns == before
+  eval_py.main(argv)
+  evaluated = json.loads((run / 'eval_rounds.json').read_text())['rounds']
+  assert [m['round'] for m in evaluated] == [0, 1]
+  assert 'is not finished' not in capsys.readouterr().err
