@@ -218,12 +218,13 @@ def test_on_disk_the_decisions_resume_and_nothing_trains_again(tmp_path, monkeyp
 def test_train_and_eval_py_with_auto_rounds_end_to_end(tmp_path, capsys):
   """A real (tiny) NeRF through train.py: a threshold no gain can pass discards R1, so the
   run trains B and R1, keeps B, says so per round, writes the decision into rounds.json;
-  a second train.py resumes and trains nothing; eval.py stops where the run stopped."""
+  a second train.py resumes and trains nothing; eval.py stops where the run stopped;
+  experiments/auto_rounds_signal.py renders the same per-view validation PSNRs again."""
   import eval as eval_py  # pylint: disable=g-import-not-at-top
   import train  # pylint: disable=g-import-not-at-top
   from test_uncertainty_quality import TINY  # pylint: disable=g-import-not-at-top
   from experiments.uncertainty_quality import PROCEDURAL  # pylint: disable=g-import-not-at-top
-  run = tmp_path / 'run'
+  run = tmp_path / 'table' / 'procedural' / 'Re-Nerfing' / 'seed0'  # renerf_scenes' layout
   argv = ['--gin_configs=experiments/configs/table_tiny.gin', f'--run_dir={run}'] + [
       f'--gin_bindings={b}' for b in PROCEDURAL + TINY + [
           'Config.val_views = 2', "Config.num_rounds = 'auto'", 'Config.auto_min_gain_se = 1e9',
@@ -247,3 +248,34 @@ def test_train_and_eval_py_with_auto_rounds_end_to_end(tmp_path, capsys):
   evaluated = json.loads((run / 'eval_rounds.json').read_text())['rounds']
   assert [m['round'] for m in evaluated] == [0, 1]
   assert 'is not finished' not in capsys.readouterr().err
+  from experiments import auto_rounds_signal  # pylint: disable=g-import-not-at-top
+  auto_rounds_signal.main(['--runs', str(tmp_path / 'table'), '--name', 'sig', '--out',
+                           str(tmp_path / 'sig')])
+  sig = json.loads((tmp_path / 'sig' / 'sig.json').read_text())
+  (row,) = sig['rows']
+  np.testing.assert_allclose(row['val_b'], rounds[0]['val_psnr_views'], atol=1e-3)
+  np.testing.assert_allclose(row['val_r1'], rounds[1]['val_psnr_views'], atol=1e-3)
+  assert row['val_gain'] == pytest.approx(rounds[1]['auto']['gain'], abs=1e-3)
+  assert (row['backbone'], row['scene'], row['seed']) == ('table', 'procedural', 0)
+  assert row['test_r1'] - row['test_b'] == pytest.approx(rounds[1]['psnr'] - rounds[0]['psnr'])
+  assert (tmp_path / 'sig' / 'sig.png').stat().st_size > 0
+
+
+def test_signal_summary_by_hand():
+  """experiments/auto_rounds_signal.summarize: the rule's outcome against always-B,
+  always-R1 and the oracle on rows whose choices are known."""
+  from experiments import auto_rounds_signal as sig  # pylint: disable=g-import-not-at-top
+  row = lambda sc, seed, b, r1, gain, take: dict(
+      backbone='grid', scene=sc, seed=seed, test_b=b, test_r1=r1, val_gain=gain, se=0.1,
+      views=4, **{f'take_{k:g}': take for k in sig.THRESHOLDS})
+  rows = [row('a', 0, 20., 21., 0.8, True), row('a', 1, 20., 19., -0.5, False),
+          row('b', 0, 10., 9.5, 0.3, True), row('b', 1, 12., 12.5, -0.1, False)]
+  scenes, overall = sig.summarize(rows)
+  a, b = scenes
+  assert (a['always_B'], a['always_R1'], a['oracle'], a['auto_1']) == (20., 20., 20.5, 20.5)
+  assert (b['always_B'], b['always_R1'], b['oracle'], b['auto_1']) == (11., 11., 11.25, 10.75)
+  o = overall['all']
+  assert o['worst_auto_1_minus_B'] == -0.25 and o['worst_scene_1'] == 'grid b'
+  assert o['regret_1'] == pytest.approx((20.5 + 11.25) / 2 - (20.5 + 10.75) / 2)
+  assert o['r_pooled'] == pytest.approx(np.corrcoef([0.8, -0.5, 0.3, -0.1],
+                                                    [1., -1., -0.5, 0.5])[0, 1])
