@@ -15,7 +15,9 @@ def auto_decision_lines(config, metrics):
   keeps (none otherwise)."""
   if not auto_rounds.is_auto(config):
     return []
-  lines = [m['auto']['line'] for m in metrics[1:] if m.get('auto')]
+  lines = [m['auto']['line'] if m.get('auto') else
+           f"round {m['round']} kept: trained before Config.num_rounds was 'auto' (no decision)"
+           for m in metrics[1:]]
   sel = auto_rounds.selected_round(metrics)
   last = metrics[-1]
   if len(metrics) - 1 == config.auto_max_rounds and (last.get('auto') or {}).get('take'):

@@ -25,6 +25,7 @@ tables of issue 61):
     --runs experiments/results/paper_table2_360/grid experiments/results/paper_table2_360/gaussians
 """
 import argparse
+import dataclasses
 import glob
 import json
 import os
@@ -41,6 +42,8 @@ from renerf_jax.round_driver import load_round_params
 from renerf_jax.run_config import load_run_config
 
 THRESHOLDS = (0., 1., 2.)  # auto_min_gain_se values compared (1: Config's default).
+# The shared fields that do not change which photos and cameras load_scene returns.
+SEED_FIELDS = ('seed', 'init_seed', 'max_steps', 'backbone', 'random_pose_spread')
 
 
 def parser():
@@ -69,7 +72,8 @@ def validation_views(run_dir, cache, scenes):
   """{round: per-view validation PSNRs} of rounds 0 and 1 (cached by path and params
   file time)."""
   config = load_run_config(run_dir)
-  key = (config.backbone, config.scene, config.data_dir, config.val_views)
+  key = tuple((f.name, repr(getattr(config, f.name))) for f in dataclasses.fields(config)
+              if f.metadata.get('group') == 'shared' and f.name not in SEED_FIELDS)
   if key not in scenes:
     scenes[key] = load_scene(config)
   scene = scenes[key]
@@ -128,16 +132,16 @@ def summarize(rows):
   for bb in sorted({r['backbone'] for r in rows}) + ['all']:
     rs = [r for r in rows if bb in ('all', r['backbone'])]
     ss = [s for s in scenes if bb in ('all', s['backbone'])]
-    means = {sc: np.mean([r['val_gain'] for r in rs if r['scene'] == sc]) for sc in
-             {r['scene'] for r in rs}}
-    tmeans = {sc: np.mean([r['test_r1'] - r['test_b'] for r in rs if r['scene'] == sc])
-              for sc in {r['scene'] for r in rs}}
+    cell = lambda r: (r['backbone'], r['scene'])
+    means = {c: np.mean([r['val_gain'] for r in rs if cell(r) == c]) for c in map(cell, rs)}
+    tmeans = {c: np.mean([r['test_r1'] - r['test_b'] for r in rs if cell(r) == c])
+              for c in map(cell, rs)}
     o = {'pairs': len(rs), 'scenes': len(ss),
          'r_pooled': pearson([r['val_gain'] for r in rs],
                              [r['test_r1'] - r['test_b'] for r in rs]),
          'r_within_scenes': pearson(
-             [r['val_gain'] - means[r['scene']] for r in rs],
-             [r['test_r1'] - r['test_b'] - tmeans[r['scene']] for r in rs])}
+             [r['val_gain'] - means[cell(r)] for r in rs],
+             [r['test_r1'] - r['test_b'] - tmeans[cell(r)] for r in rs])}
     for col in ['always_B', 'always_R1', 'oracle'] + [f'auto_{k:g}' for k in THRESHOLDS]:
       o[col] = float(np.mean([s[col] for s in ss]))
     for k in THRESHOLDS:

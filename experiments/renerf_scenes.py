@@ -60,6 +60,7 @@ from experiments import paired, tables
 from renerf_jax import figures, jit_cache, renerf, report, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
+from renerf_jax.errors import ConfigError
 
 METRICS = ('psnr', 'ssim', 'lpips_alex')
 TWO_X = 'B 2x steps'  # the row of B trained 2x longer (the control for more compute)
@@ -205,7 +206,9 @@ def finished_rounds(run_dir):
   path = rundir.config_json_path(run_dir)
   if not os.path.isfile(path):
     return 0
-  n = int(report.read_json(path).get('num_rounds', 0))
+  n = report.read_json(path).get('num_rounds', 0)
+  if not isinstance(n, int):  # 'auto' (train.py's): the table's rows are fixed rounds.
+    raise ConfigError(f"{path}: num_rounds={n!r}; a table reads runs of integer rounds")
   done = all(rundir.is_done(rundir.round_dir(run_dir, r)) for r in range(n + 1))
   return n if done else 0
 

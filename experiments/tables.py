@@ -39,9 +39,10 @@ import sys
 import numpy as np
 
 from experiments import sharing
-from renerf_jax import cli, figures, jit_cache, report, round_driver, rundir
+from renerf_jax import auto_rounds, cli, figures, jit_cache, report, round_driver, rundir
 from renerf_jax.configs import load_config
 from renerf_jax.datasets import load_scene
+from renerf_jax.errors import ConfigError
 
 METRICS = ('psnr', 'ssim', 'lpips_alex', 'lpips_vgg')
 NAMES = {'psnr': 'PSNR', 'ssim': 'SSIM', 'lpips_alex': 'LPIPS-alex', 'lpips_vgg': 'LPIPS-vgg'}
@@ -175,6 +176,9 @@ def run_seed(config, scene, run_dir, share_from=()):
     (list of per-round metrics, the run directory round_0 was copied from or None, the
     run directory later rounds were copied from or None).
   """
+  if auto_rounds.is_auto(config):
+    raise ConfigError("Config.num_rounds='auto' is train.py's: a table's rows train a fixed "
+                      'number of rounds (bind an integer)')
   cli.check_run_dir(config, run_dir, create=True)
   copied = None
   if not os.path.exists(rundir.round_dir(run_dir, 0)):

@@ -104,8 +104,10 @@ def test_errors(scene, out):
   return err, uq.depth_abs_error(depth, scene.depths[idx], cap)
 
 
-def compute_run(config, scene, params, panel_view):
-  """Both Hessian passes, then every signal on the test views and one pseudo-view."""
+def compute_run(config, scene, params, panel_view, pose_scene=None):
+  """Both Hessian passes, then every signal on the scene's test views (the validation
+  views' scene with --views validation) and one pseudo-view of pose_scene (default scene:
+  the capture as trained, whose test views stay test views)."""
   box = contraction.CONTRACTED_BOX if config.contraction else scene.bbox  # as renerf.py
   lo, hi = (np.asarray(b, np.float32) for b in box)
   tables, info = us.hessian_tables(config, params, ray_pool(scene, scene.train_idx)['rays'],
@@ -114,7 +116,7 @@ def compute_run(config, scene, params, panel_view):
   test = us.render_signals(config, params, camera_rays(scene, scene.test_idx), lo, hi,
                            tables, show_progress=True, desc='test views')
   info['render_seconds'] = time.perf_counter() - t0
-  poses, _ = pseudo_view_poses(config, scene)
+  poses, _ = pseudo_view_poses(config, pose_scene or scene)
   pose = poses[min(panel_view, len(poses) - 1)][None]
   pv = us.render_signals(config, params, camera_rays(scene, None, pose), lo, hi, tables)
   err, derr = test_errors(scene, test)
@@ -161,7 +163,7 @@ def run_one(args, root, scene_name, seed):
     sharing.copy_baseline(config, src, run_dir)
     report.write_json(rundir.shared_baseline_path(run_dir), {'from': src})  # as tables
   state = round_driver.run_rounds(config, scene, run_dir, show_progress=False)
-  arrays, info = compute_run(config, measured, state.params, args.panel_view)
+  arrays, info = compute_run(config, measured, state.params, args.panel_view, scene)
   with report.atomic_open(npath, 'wb') as f:
     np.savez_compressed(f, **arrays)
   round_s = float(state.metrics[0]['round_seconds'])

@@ -9,8 +9,12 @@ else the run keeps B (the previous round's model) and trains no further round. A
 Config.auto_max_rounds rounds are trained. Nothing here looks at the test views.
 
 Pure functions of the rounds' metrics dicts (renerf.round_step puts each model's
-per-view validation PSNR in 'val_psnr_views'); the decision is stored in the round's
-metrics under 'auto' and is recomputed the same on a resumed run.
+per-view validation PSNR in 'val_psnr_views'); the decision is made once, stored in the
+round's metrics under 'auto' (result.json) and read back when a run resumes, so a later
+auto_min_gain_se changes no stored decision. A round trained before the run was 'auto'
+has no decision and counts as kept. The round driver's RoundState after a discard holds
+the discarded round's params; selected_round names the model the run keeps (its params
+are round_<k>/params.msgpack).
 """
 import math
 from typing import Optional, Sequence
@@ -111,8 +115,11 @@ def selected_round(metrics: Sequence[dict]) -> int:
 
 
 def stops_after(config, metrics: Sequence[dict]) -> bool:
-  """True when no further round is trained after the rounds in `metrics`."""
+  """True when no further round is trained after the rounds in `metrics` (with an
+  integer num_rounds only the count decides, whatever decisions a run stored)."""
   if len(metrics) > max_rounds(config):
     return True
+  if not is_auto(config):
+    return False
   last = metrics[-1].get('auto') if metrics else None
   return last is not None and not last['take']

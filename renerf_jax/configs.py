@@ -254,13 +254,10 @@ class Config:
   proposal_mlp_width: int = nerf(16, '>=1')  # Hidden width of its density MLP.
   interlevel_loss_mult: float = nerf(1., '>=0')  # Weight of its interlevel loss.
   # --- Re-Nerfing: rounds, D's training, pseudo-views ---
-  # Rounds after the baseline (0: none), or 'auto' (renerf_jax/auto_rounds.py): after
-  # each round its model and the previous one are compared on the validation views
-  # (Config.val_views >= 2); the round is kept, and the next trained, only when the
-  # per-view gain exceeds auto_min_gain_se standard errors, at most auto_max_rounds.
+  # Rounds after the baseline (0: none), or 'auto': decided on validation views.
   num_rounds: Union[int, str] = renerf(0, NUM_ROUNDS, 'rounds')
-  auto_max_rounds: int = renerf(3, '>=1', 'rounds')
-  auto_min_gain_se: float = renerf(1., '>=0', 'rounds')
+  auto_max_rounds: int = renerf(3, '>=1', 'rounds')  # 'auto': at most this many rounds,
+  auto_min_gain_se: float = renerf(1., '>=0', 'rounds')  # kept when gain > this x its se.
   # train.py also trains round 1's seed-matched control (renerf.control_config: B's
   # training at D's seed, no pseudo-views) in <run>/control/ and reports R1 against it.
   seed_control: bool = renerf(False, None, 'rounds')

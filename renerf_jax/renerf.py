@@ -121,7 +121,12 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
     metrics.update({f'val_{k}': v for k, v in val.mean.items()})
     metrics['val_psnr_views'] = [float(v['psnr']) for v in val.per_image]
   if r > 0 and auto_rounds.is_auto(config):  # Keep D, or B? (validation views only)
-    metrics['auto'] = auto_rounds.round_decision(config, state.metrics[-1], metrics)
+    prev = state.metrics[-1]
+    if 'val_psnr_views' not in prev:  # B from before 'auto' (resumed, copied): render it.
+      ev = backbone.evaluate(round_config(config, r - 1), validation_scene(scene),
+                             state.params, show_progress=False)
+      prev = dict(prev, val_psnr_views=[float(v['psnr']) for v in ev.per_image])
+    metrics['auto'] = auto_rounds.round_decision(config, prev, metrics)
   return RoundState(params=result.state.params, pseudo=pseudo, round_index=r,
                     metrics=state.metrics + (metrics,),
                     curves=state.curves + (result.curve,), seconds=seconds)
@@ -156,7 +161,8 @@ def check_rounds_config(config, scene):
 
 def run_rounds(config, scene, show_progress: bool = False) -> RoundState:
   """Baseline plus config.num_rounds rounds in memory (round_driver.run_rounds: on disk);
-  with num_rounds 'auto', until a round is discarded (auto_rounds.stops_after)."""
+  with num_rounds 'auto', until a round is discarded (auto_rounds.stops_after): the state
+  then holds the discarded round's params, auto_rounds.selected_round the kept one's."""
   check_rounds_config(config, scene)
   state = round_step(config, scene, initial_state(), show_progress)
   while not auto_rounds.stops_after(config, state.metrics):

@@ -92,9 +92,13 @@ def test_selected_round_and_stopping():
   assert not auto_rounds.stops_after(cfg, [{'round': 0}, kept(1)])
   assert auto_rounds.stops_after(cfg, [{'round': 0}, dropped(1)])
   assert auto_rounds.stops_after(cfg, [{'round': 0}, kept(1), kept(2)])
-  fixed = types.SimpleNamespace(num_rounds=1, auto_max_rounds=5)
-  assert auto_rounds.max_rounds(fixed) == 1 and auto_rounds.max_rounds(cfg) == 2
-  assert auto_rounds.stops_after(fixed, [{'round': 0}, {'round': 1}])
+  fixed = types.SimpleNamespace(num_rounds=3, auto_max_rounds=5)
+  assert auto_rounds.max_rounds(fixed) == 3 and auto_rounds.max_rounds(cfg) == 2
+  # An integer count trains on past a decision stored by an earlier 'auto' invocation.
+  assert not auto_rounds.stops_after(fixed, [{'round': 0}, dropped(1)])
+  assert auto_rounds.stops_after(fixed, [{'round': 0}, kept(1), kept(2), dropped(3)])
+  none = types.SimpleNamespace(num_rounds=0, auto_max_rounds=5)
+  assert auto_rounds.max_rounds(none) == 0 and auto_rounds.stops_after(none, [{'round': 0}])
 
 
 def test_auto_needs_two_validation_views():
@@ -279,3 +283,32 @@ def test_signal_summary_by_hand():
   assert o['regret_1'] == pytest.approx((20.5 + 11.25) / 2 - (20.5 + 10.75) / 2)
   assert o['r_pooled'] == pytest.approx(np.corrcoef([0.8, -0.5, 0.3, -0.1],
                                                     [1., -1., -0.5, 0.5])[0, 1])
+
+
+def test_a_b_without_per_view_psnrs_is_rendered_for_the_decision(tmp_path, monkeypatch):
+  """Resuming as 'auto' a run whose B was trained before (its result.json has no
+  val_psnr_views, as every run before 'auto' existed): round 1 renders B at the
+  validation views and decides on that."""
+  config, scene = _scene_and_config()
+  calls = []
+  monkeypatch.setattr(backbones, 'get_backbone', lambda cfg: fake_backbone(GAINS, calls))
+  run = str(tmp_path / 'run')
+  import dataclasses  # pylint: disable=g-import-not-at-top
+  round_driver.run_rounds(dataclasses.replace(config, num_rounds=0), scene, run, False)
+  path = tmp_path / 'run' / 'round_0' / 'result.json'
+  result = json.loads(path.read_text())
+  del result['metrics']['val_psnr_views']
+  path.write_text(json.dumps(result))
+  state = round_driver.run_rounds(dataclasses.replace(config, auto_max_rounds=1), scene,
+                                  run, False)
+  assert calls == [0, 1]
+  d = state.metrics[1]['auto']
+  assert d['take'] and d['gain'] == pytest.approx(np.mean(np.subtract(GAINS[1], GAINS[0])))
+
+
+def test_the_table_scripts_refuse_auto(tmp_path):
+  from experiments import tables  # pylint: disable=g-import-not-at-top
+  config, scene = _scene_and_config()
+  with pytest.raises(ConfigError, match="num_rounds='auto' is train.py's"):
+    tables.run_seed(config, scene, str(tmp_path / 'run'))
+  assert not (tmp_path / 'run').exists()
