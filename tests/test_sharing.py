@@ -34,8 +34,9 @@ def test_sharing_rules_derive_from_the_config_field_categories():
   assert 'num_samples' not in sharing.RENDER_IRRELEVANT
   assert 'hessian_rays' in sharing.RENDER_IRRELEVANT
   assert set(configs.fields_where('resumable')) == {
-      'num_rounds', 'seed_control', 'print_every', 'render_chunk', 'hessian_chunk',
-      'eval_n_views', 'eval_every', 'eval_stride', 'checkpoint_every', 'lpips_nets'}
+      'num_rounds', 'auto_max_rounds', 'auto_min_gain_se', 'seed_control', 'print_every',
+      'render_chunk', 'hessian_chunk', 'eval_n_views', 'eval_every', 'eval_stride',
+      'checkpoint_every', 'lpips_nets'}
 
 
 def test_copy_baseline_shares_round_0_between_variants_only(tmp_path):
