@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 from experiments.tables import command_line
-from renerf_jax import auto_rounds, backbones, cli, figures, jit_cache, renerf, report, rundir
+from renerf_jax import auto_rounds, cli, figures, jit_cache, renerf, report, rundir
 from renerf_jax.datasets import load_scene
 from renerf_jax.progress import progress_bar
 from renerf_jax.round_driver import load_round_params
@@ -86,10 +86,7 @@ def validation_views(run_dir, cache, scenes):
     stamp = f'{rdir}@{os.stat(rundir.params_path(rdir)).st_mtime_ns}'
     if stamp not in cache:
       params = load_round_params(config, rdir, r)
-      ev = backbones.get_backbone(config).evaluate(
-          renerf.round_config(config, r), renerf.validation_scene(scene), params,
-          show_progress=False)
-      cache[stamp] = [float(m['psnr']) for m in ev.per_image]
+      cache[stamp] = renerf.validation_metrics(config, scene, params, r)['val_psnr_views']
     out[r] = cache[stamp]
   return out
 

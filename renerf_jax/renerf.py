@@ -70,6 +70,16 @@ def validation_scene(scene):
                              val_idx=np.zeros(0, np.int64))
 
 
+def validation_metrics(config, scene, params, r) -> dict:
+  """Round r's model (params) at the scene's validation views: val_<metric> means and
+  val_psnr_views (one PSNR per view, for Config.num_rounds = 'auto')."""
+  val = backbones.get_backbone(config).evaluate(round_config(config, r),
+                                                validation_scene(scene), params,
+                                                show_progress=False)
+  return dict({f'val_{k}': v for k, v in val.mean.items()},
+              val_psnr_views=[float(v['psnr']) for v in val.per_image])
+
+
 def round_step(config, scene, state: RoundState, show_progress: bool = False,
                synthesize_fn: Optional[Callable] = None,
                train_fn: Optional[Callable] = None,
@@ -115,17 +125,12 @@ def round_step(config, scene, state: RoundState, show_progress: bool = False,
   ev = evaluate_fn(cfg, scene, result.state.params)
   metrics = dict(ev.mean, round=r, round_seconds=synth_seconds + result.train_seconds,
                  cumulative_seconds=seconds, nan_skips=int(result.state.nan_skips))
-  if len(scene.val_idx):  # The validation views' means as val_<metric> (no renders kept).
-    val = backbone.evaluate(cfg, validation_scene(scene), result.state.params,
-                            show_progress=False)
-    metrics.update({f'val_{k}': v for k, v in val.mean.items()})
-    metrics['val_psnr_views'] = [float(v['psnr']) for v in val.per_image]
+  if len(scene.val_idx):  # The validation views' means and per-view PSNRs (no renders).
+    metrics.update(validation_metrics(config, scene, result.state.params, r))
   if r > 0 and auto_rounds.is_auto(config):  # Keep D, or B? (validation views only)
     prev = state.metrics[-1]
     if 'val_psnr_views' not in prev:  # B from before 'auto' (resumed, copied): render it.
-      ev = backbone.evaluate(round_config(config, r - 1), validation_scene(scene),
-                             state.params, show_progress=False)
-      prev = dict(prev, val_psnr_views=[float(v['psnr']) for v in ev.per_image])
+      prev = dict(prev, **validation_metrics(config, scene, state.params, r - 1))
     metrics['auto'] = auto_rounds.round_decision(config, prev, metrics)
   return RoundState(params=result.state.params, pseudo=pseudo, round_index=r,
                     metrics=state.metrics + (metrics,),
