@@ -119,3 +119,6 @@ def check_config(c):
          f'{c.anneal_nearfar_steps}); raise it to at least '
          f'{min(c.anneal_nearfar_steps, c.max_steps) / c.max_steps:.4f}')
   _check(c.far >= c.near, f'Config.far={c.far} < Config.near={c.near}')
+  _check(c.leave_out_view < 0 or c.val_views == 0,
+         f'Config.leave_out_view={c.leave_out_view} makes the left-out training view the '
+         f'only validation view; set Config.val_views = 0 (not {c.val_views})')

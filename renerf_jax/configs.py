@@ -62,6 +62,11 @@ class Config:
   # (datasets/split.py). Blender's layout: blender_split, and val from transforms_val.json.
   train_view_selection: str = shared('linspace', 'linspace|coverage')
   val_views: int = shared(0, '>=0')
+  # A leave-one-training-view-out probe (issue 64's signal for captures without
+  # validation views): the leave_out_view-th of the selected training views (0-based, in
+  # split order) is not trained on and is the only validation view; -1: off. Needs
+  # val_views = 0 (split.leave_out_view).
+  leave_out_view: int = shared(-1, '>=-1')
   # Blender layout (transforms_test.json): every test_stride-th test frame is a test view
   # (the few-shot Blender protocol of DietNeRF / FreeNeRF: 8, i.e. 25 of lego's 200).
   test_stride: int = shared(1, '>=1')

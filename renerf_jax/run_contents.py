@@ -27,12 +27,16 @@ class RoundInfo:
   step: Optional[int]  # Training step of the parameters there (None: none yet).
   # Config.num_rounds = 'auto': the finished round's decision line (auto_rounds.decide).
   decision: Optional[str] = None
+  # False for a round whose 'auto' decision discarded it (the run keeps the one before).
+  kept: bool = True
 
   @property
   def label(self) -> str:
     """The round's name in the viewer's menus ('B (round 0)', 'R1', ...): the same while
-    it trains and once finished (the training step is shown in the status line)."""
-    return 'B (round 0)' if self.index == 0 else f'R{self.index}'
+    it trains and once finished (the training step is shown in the status line), marked
+    'R2 (discarded)' once an 'auto' decision discards it."""
+    name = 'B (round 0)' if self.index == 0 else f'R{self.index}'
+    return name if self.kept else f'{name} (discarded)'
 
 
 def list_rounds(config, run_dir):
@@ -52,13 +56,23 @@ def list_rounds(config, run_dir):
         except (OSError, ValueError, KeyError):
           pass  # Shown without its decision.
       decided.append(m)
-      out.append(RoundInfo(r, True, None, (m.get('auto') or {}).get('line')))
+      d = m.get('auto') or {}
+      out.append(RoundInfo(r, True, None, d.get('line'), d.get('take', True)))
       continue
     ckpts = rundir.list_checkpoints(rundir.round_checkpoints_dir(run_dir, r))
     if ckpts:
       out.append(RoundInfo(r, False, ckpts[-1][0]))
     break
   return out
+
+
+def shown_round(rounds) -> int:
+  """The position in `rounds` (list_rounds) of the model a viewer opens on: the newest
+  round, or with num_rounds 'auto' the round the run keeps when the newest was discarded
+  (list_rounds lists none after it)."""
+  if not rounds:
+    raise ValueError('no rounds to show')
+  return len(rounds) - 2 if len(rounds) > 1 and not rounds[-1].kept else len(rounds) - 1
 
 
 def load_params(config, run_dir, r):

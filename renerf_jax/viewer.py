@@ -107,7 +107,8 @@ class Viewer(FrameRenderer):
     gui.add_markdown(f'**{self.run_dir}**  \n{self.scene.name}, backbone '
                      f'`{c.backbone}`, {len(self.scene.train_idx)} training views')
     labels = self._labels()
-    self.gui_model = gui.add_dropdown('Model', labels, initial_value=labels[-1])
+    self.gui_model = gui.add_dropdown(
+        'Model', labels, initial_value=labels[run_contents.shown_round(self.rounds)])
     self.gui_compare = gui.add_dropdown('Compare with', [NONE] + labels, initial_value=NONE)
     self.gui_split = gui.add_slider('Split', 0., 1., .01, .5)
     self.gui_layer = gui.add_dropdown('Layer', vc.LAYERS, initial_value='rgb')
@@ -247,12 +248,19 @@ class Viewer(FrameRenderer):
     changed = new_rounds
     if new_rounds:
       following = self.gui_model.value == self._labels()[-1]
+      # By round index: a label changes when an 'auto' decision discards its round.
+      model, compare = self._round_of(self.gui_model.value), self._round_of(
+          self.gui_compare.value)
       self.rounds = rounds
       labels = self._labels()
       self.gui_model.options = labels
       self.gui_compare.options = [NONE] + labels
-      if following and self.gui_follow.value:
-        self.gui_model.value = labels[-1]
+      by_index = {ri.index: ri.label for ri in rounds}
+      if following and self.gui_follow.value:  # A round just discarded: the kept one.
+        self.gui_model.value = labels[run_contents.shown_round(rounds)]
+      elif model in by_index:
+        self.gui_model.value = by_index[model]
+      self.gui_compare.value = by_index.get(compare, NONE)
     else:
       self.rounds = rounds
     self.gui_decisions.content = decisions_text(rounds)

@@ -1,5 +1,6 @@
 """Config.num_rounds = 'auto' (renerf_jax/auto_rounds.py): the decision on validation
 views, its extreme inputs, and the rounds it trains in memory and on disk."""
+import dataclasses
 import json
 import math
 import types
@@ -217,6 +218,11 @@ def test_on_disk_the_decisions_resume_and_nothing_trains_again(tmp_path, monkeyp
   assert [r.index for r in rounds] == [0, 1, 2, 3]
   assert rounds[0].decision is None
   assert rounds[3].decision.startswith('round 3 discarded, the run keeps round 2: ')
+  # The viewer's menus mark the discarded round and open on the kept one.
+  assert [r.label for r in rounds] == ['B (round 0)', 'R1', 'R2', 'R3 (discarded)']
+  assert run_contents.shown_round(rounds) == 2
+  assert run_contents.shown_round(rounds[:3]) == 2
+  assert run_contents.shown_round([dataclasses.replace(rounds[1], kept=False)]) == 0
 
 
 def test_train_and_eval_py_with_auto_rounds_end_to_end(tmp_path, capsys):
@@ -283,6 +289,89 @@ def test_signal_summary_by_hand():
   assert o['regret_1'] == pytest.approx((20.5 + 11.25) / 2 - (20.5 + 10.75) / 2)
   assert o['r_pooled'] == pytest.approx(np.corrcoef([0.8, -0.5, 0.3, -0.1],
                                                     [1., -1., -0.5, 0.5])[0, 1])
+
+
+def test_signal_rule_over_several_rounds_by_hand():
+  """auto_rounds_signal with rounds beyond R1: the rule walks round after round and stops
+  at the first discarded one; the oracle is the best round per seed; later rounds' signal
+  is paired with their test gain over the previous round."""
+  from experiments import auto_rounds_signal as sig  # pylint: disable=g-import-not-at-top
+  up, flat = [20., 21., 22.], [20., 20.1, 19.9]  # Per-view PSNRs of a model.
+  views = [up, [v + 1. for v in up], [v + .9 for v in up], [v + 3. for v in up]]
+  sel, decisions = sig.rule(views, 1.)
+  assert sel == 1 and [d['take'] for d in decisions] == [True, False]  # R3 never reached.
+  assert sig.rule([up, flat], 1.)[0] == 0
+  assert sig.rule(views[:2] + [[v + 2. for v in up]], 0.)[0] == 2
+  row = dict(backbone='grid', scene='a', seed=0, test_b=20., test_r1=21., val_gain=1.,
+             se=0., views=3, tests=[20., 21., 23., 22.],
+             later=[{'round': 2, 'gain': -.1, 'se': 0., 'test_gain': 2.},
+                    {'round': 3, 'gain': 2.1, 'se': 0., 'test_gain': -1.}],
+             **{f'take_{k:g}': True for k in sig.THRESHOLDS},
+             **{f'sel_{k:g}': 1 for k in sig.THRESHOLDS})
+  other = dict(row, seed=1, tests=[20., 19., 18., 17.], test_r1=19., val_gain=-1.,
+               later=[{'round': 2, 'gain': .5, 'se': 0., 'test_gain': -1.}],
+               **{f'take_{k:g}': False for k in sig.THRESHOLDS},
+               **{f'sel_{k:g}': 0 for k in sig.THRESHOLDS})
+  (scene,), overall = sig.summarize([row, other])
+  assert scene['always'] == [20., 20., 20.5, 19.5]
+  assert scene['oracle'] == (23. + 20.) / 2 and scene['auto_1'] == (21. + 20.) / 2
+  assert scene['rounds_1'] == [1, 0]
+  o = overall['all']
+  assert o['later_pairs'] == 3
+  assert o['r_later_rounds'] == pytest.approx(np.corrcoef([-.1, 2.1, .5], [2., -1., -1.])[0, 1])
+  md = sig.markdown('m', [row, other], [scene], overall, 'cmd')
+  assert '| grid | a | 0 | R3 | +2.10 +- 0.00 | -1.00 | 1 / 1 / 1 |' in md
+  assert 'R2 20.50, R3 19.50; rounds kept [1, 0]' in md
+
+
+def _fake_run(run, config, metrics):
+  """A finished run directory as the tables leave it: config.json, and per round its
+  result.json metrics and DONE marker."""
+  run.mkdir(parents=True)
+  (run / 'config.json').write_text(json.dumps(config))
+  for r, m in enumerate(metrics):
+    rdir = run / f'round_{r}'
+    rdir.mkdir()
+    (rdir / 'result.json').write_text(json.dumps({'metrics': dict(m, round=r)}))
+    rundir.mark_done(str(rdir))
+
+
+def test_leave_one_out_signal_from_probe_tables(tmp_path):
+  """auto_rounds_signal --loo: each probe (a table made with Config.leave_out_view = j)
+  gives R1 - B at its left-out view; the signal is their mean +- the standard error over
+  the folds, paired with the full run of the same backbone, scene and seed; a folder of
+  runs that are not probes is refused."""
+  from experiments import auto_rounds_signal as sig  # pylint: disable=g-import-not-at-top
+  for j, (b, r1) in enumerate([(20., 20.6), (18., 18.2), (21., 21.4)]):
+    _fake_run(tmp_path / f'loo{j}' / 'fern' / 'Re-Nerfing' / 'seed0',
+              {'backbone': 'nerf', 'leave_out_view': j},
+              [{'val_psnr': b, 'cumulative_seconds': 10.},
+               {'val_psnr': r1, 'cumulative_seconds': 30.}])
+  _fake_run(tmp_path / 'loo9' / 'fern' / 'Re-Nerfing' / 'seed1',
+            {'backbone': 'gaussians', 'leave_out_view': 0},
+            [{'val_psnr': 1., 'cumulative_seconds': 1.}, {'val_psnr': 2., 'cumulative_seconds': 2.}])
+  folds = sig.loo_folds([str(tmp_path / f'loo{j}') for j in (0, 1, 2, 9)])
+  assert set(folds) == {('nerf', 'fern', 0), ('gaussians', 'fern', 1)}
+  fern = folds[('nerf', 'fern', 0)]
+  assert sorted(f['view'] for f in fern) == [0, 1, 2]
+  assert sorted(f['gain'] for f in fern) == pytest.approx([.2, .4, .6])
+  gain, se, take = sig.loo_signal(fern, 1.)
+  assert gain == pytest.approx(.4) and se == pytest.approx(.2 / math.sqrt(3))
+  assert take and not sig.loo_signal(fern, 4.)[2]  # 0.4 < 4 standard errors (0.46).
+  assert not sig.loo_signal([dict(f, gain=-f['gain']) for f in fern], 0.)[2]
+  _fake_run(tmp_path / 'full' / 'fern' / 'Re-Nerfing' / 'seed0', {'backbone': 'nerf'},
+            [{'val_psnr': 1., 'cumulative_seconds': 1.}] * 2)
+  with pytest.raises(SystemExit, match='not a leave-one-out probe'):
+    sig.loo_folds([str(tmp_path / 'full')])
+  row = dict(backbone='nerf', scene='fern', seed=0, test_b=20., test_r1=19.5, val_gain=.1,
+             se=.1, views=4, loo_gain=gain, loo_se=se, loo_take=take, loo_folds=3,
+             loo_views=[0, 1, 2], loo_seconds=90., round_seconds=60.,
+             **{f'take_{k:g}': False for k in sig.THRESHOLDS})
+  (scene,), overall = sig.summarize([row])
+  assert (scene['auto_loo'], scene['loo_always_B'], scene['loo_cost']) == (19.5, 20., 1.5)
+  assert overall['all']['worst_auto_loo_minus_B'] == -.5
+  md = sig.markdown('m', [row], [scene], overall, 'cmd')
+  assert '| nerf | fern | 0 | 3 | +0.40 +- 0.12 | -0.50 | yes | 1.50 |' in md
 
 
 def test_a_b_without_per_view_psnrs_is_rendered_for_the_decision(tmp_path, monkeypatch):

@@ -11,8 +11,9 @@ from renerf_jax import pseudo_views, renerf
 from renerf_jax.configs import Config
 from renerf_jax.datasets import load_scene
 from renerf_jax.datasets.scene import fewshot_split
-from renerf_jax.datasets.split import camera_distances, coverage_views, split_views
-from renerf_jax.errors import DataError
+from renerf_jax.datasets.split import (camera_distances, coverage_views, leave_out_view,
+                                       split_views)
+from renerf_jax.errors import ConfigError, DataError
 
 
 def ring(n, radius=2., wobble=0.):
@@ -72,6 +73,28 @@ def test_fern_validation_views_and_the_oracle_never_uses_them():
   assert len(s.val_idx) == 4 and not set(s.val_idx) & (set(s.train_idx) | set(s.test_idx))
   assert not set(pseudo_views.unused_views(s)) & set(s.val_idx)
   assert len(pseudo_views.unused_views(s)) == 20 - 3 - 3 - 4
+
+
+def test_leave_out_view_holds_one_training_view_out_as_the_only_validation_view():
+  """Config.leave_out_view = j (issue 64's probe): the j-th training view is neither
+  trained on nor an oracle target, it is the validation view; the test views stay."""
+  base = load_scene(Config(data_dir=str(LLFF_DIR)))
+  for j in range(3):
+    s = load_scene(Config(data_dir=str(LLFF_DIR), leave_out_view=j))
+    assert s.val_idx.tolist() == [base.train_idx[j]]
+    assert s.train_idx.tolist() == [v for i, v in enumerate(base.train_idx) if i != j]
+    np.testing.assert_array_equal(s.test_idx, base.test_idx)
+    assert base.train_idx[j] not in pseudo_views.unused_views(s)
+  train, val = leave_out_view(np.array([4, 9]), np.zeros(0), -1)  # Off: as it is.
+  assert (train.tolist(), val.tolist()) == ([4, 9], [])
+  with pytest.raises(DataError, match='leave_out_view=0: the split has 1 training views'):
+    leave_out_view(np.array([4]), np.zeros(0), 0)
+  with pytest.raises(DataError, match='has 2 validation views already'):
+    leave_out_view(np.array([4, 9]), np.array([5, 6]), 1)
+  with pytest.raises(DataError, match='leave_out_view=3: the split has 3 training views'):
+    load_scene(Config(data_dir=str(LLFF_DIR), leave_out_view=3))
+  with pytest.raises(ConfigError, match='set Config.val_views = 0'):
+    Config(data_dir=str(LLFF_DIR), leave_out_view=0, val_views=2)
 
 
 def test_blender_validation_views_come_from_transforms_val(tmp_path):

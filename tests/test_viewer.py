@@ -260,6 +260,20 @@ def test_follow_training_shows_the_newest_checkpoint(demo_run, tmp_path):
     for path in (rundir.params_path, rundir.done_path):
       shutil.copy(path(done_r1), path(run_r1))
     assert v.refresh() and v.rounds[-1].done and v.params(1)[1] is None
+    assert v.gui_model.value == 'R1'
+    # With num_rounds 'auto' a finished round can be discarded: the menus mark it and a
+    # viewer that followed training moves to the model the run keeps (B); the compare
+    # menu keeps pointing at the same round under its new label.
+    v.gui_compare.value = 'R1'
+    listed = run_contents.list_rounds
+    run_contents.list_rounds = lambda *a: [dataclasses.replace(ri, kept=ri.index == 0)
+                                           for ri in listed(*a)]
+    try:
+      assert v.refresh()
+    finally:
+      run_contents.list_rounds = listed
+    assert v._labels() == ['B (round 0)', 'R1 (discarded)']
+    assert (v.gui_model.value, v.gui_compare.value) == ('B (round 0)', 'R1 (discarded)')
   finally:
     v.stop()
 

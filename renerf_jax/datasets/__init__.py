@@ -1,5 +1,8 @@
 """Datasets: LLFF, transforms.json (Instant-NGP / nerfstudio), COLMAP, Blender and the two embedded
 scenes (forward-facing 'procedural', 360-degree 'orbit'), behind one `load_scene`."""
+import dataclasses
+
+from renerf_jax.datasets import split
 from renerf_jax.datasets.scene import (Scene, camera_rays, downsample_scene, fewshot_split,
                                        ray_pool)
 
@@ -27,4 +30,8 @@ def load_scene(config) -> Scene:
   else:
     from renerf_jax.datasets.procedural import load_procedural  # pylint: disable=g-import-not-at-top
     scene = load_procedural(config)
-  return downsample_scene(scene, config.image_downsample)
+  scene = downsample_scene(scene, config.image_downsample)
+  if config.leave_out_view >= 0:  # Issue 64's probe: a training view held out.
+    train, val = split.leave_out_view(scene.train_idx, scene.val_idx, config.leave_out_view)
+    scene = dataclasses.replace(scene, train_idx=train, val_idx=val)
+  return scene

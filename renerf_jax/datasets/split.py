@@ -17,12 +17,41 @@ Config.val_views = k validation views are then taken evenly spaced by index
 capture as the test views do; tables choose steps, radii, thresholds and recipes on them,
 never on test views. The rest stay unused (the oracle's pseudo-views: pseudo_targets
 'unused'). Blender's layout has split files of its own (blender.blender_split).
+Config.leave_out_view = j then takes the j-th training view out of training as the only
+validation view (a probe of a capture with no views to spare: leave_out_view), for
+every loader.
 """
 import numpy as np
 
 from renerf_jax.errors import DataError
 
 SELECTIONS = ('linspace', 'coverage')
+
+
+def leave_out_view(train_idx, val_idx, j):
+  """The split of a leave-one-training-view-out probe (Config.leave_out_view).
+
+  Args:
+    train_idx: [n] the training views, in split order. val_idx: the validation views
+      (must be empty: the left-out view is the probe's only one).
+    j: which training view is left out (0 <= j < n), or -1: the split as it is.
+
+  Returns:
+    (train_idx without its j-th view, [that view]) int64 arrays; unchanged with j = -1.
+  """
+  train_idx = np.asarray(train_idx, np.int64)
+  val_idx = np.asarray(val_idx, np.int64)
+  if j < 0:
+    return train_idx, val_idx
+  if not 0 <= j < len(train_idx) or len(train_idx) < 2:
+    raise DataError(f'Config.leave_out_view={j}: the split has {len(train_idx)} training '
+                    f'views (leaving one out needs 2 or more, and 0 <= j < '
+                    f'{len(train_idx)})')
+  if len(val_idx):
+    raise DataError(f'Config.leave_out_view={j}: the scene has {len(val_idx)} validation '
+                    'views already; the left-out view is the only one (Config.val_views '
+                    '= 0)')
+  return np.delete(train_idx, j), train_idx[j:j + 1]
 
 
 def evenly_spaced(candidates, n):
