@@ -31,9 +31,8 @@ class Config:
 
   Each field is declared by its concern (shared, nerf, gaussians, renerf, report: see
   config_fields), which records the backbone that reads it and what it can change
-  (`affects`). The declaration order is the order in which a run directory's config.gin
-  and config.json list the fields, kept as it was: the section comments name the concern
-  of each block, and a few shared fields sit inside a block of another concern.
+  (`affects`). Declaration order = the order of a run directory's config.gin and
+  config.json, kept as it was (a few shared fields sit in another concern's block).
   """
   # --- shared: data and split ---
   # 'llff', 'transforms' (Instant-NGP / nerfstudio transforms.json), 'colmap' (sparse/0),
@@ -62,11 +61,7 @@ class Config:
   # (datasets/split.py). Blender's layout: blender_split, and val from transforms_val.json.
   train_view_selection: str = shared('linspace', 'linspace|coverage')
   val_views: int = shared(0, '>=0')
-  # A leave-one-training-view-out probe (issue 64's signal for captures without
-  # validation views): the leave_out_view-th of the selected training views (0-based, in
-  # split order) is not trained on and is the only validation view; -1: off. Needs
-  # val_views = 0 (split.leave_out_view).
-  leave_out_view: int = shared(-1, '>=-1')
+  leave_out_view: int = shared(-1, '>=-1')  # Issue 64's probe (split.leave_out_view).
   # Blender layout (transforms_test.json): every test_stride-th test frame is a test view
   # (the few-shot Blender protocol of DietNeRF / FreeNeRF: 8, i.e. 25 of lego's 200).
   test_stride: int = shared(1, '>=1')
