@@ -44,7 +44,7 @@ SOURCES = (
     ('real 360 capture (fox, 12 views)', '3DGS + dropout', 'gaussians_dropout/fox.json',
      '135x240'),
     ('real 360, paper setting (garden, 30 views)', 'NeRF (grid)',
-     'paper_table2_360/grid_garden.json', '128x128, 3 seeds'),
+     'paper_table2_360/grid_garden.json', '128x128, 8 seeds'),
     ('real 360, paper setting (garden, 30 views)', '3DGS',
      'paper_table2_360/gaussians_garden.json', '128x128, SfM start, 5 seeds'),
     ('real 360, paper setting (bear, dinosaur, 30 views)', 'NeRF (grid)',
