@@ -413,8 +413,10 @@ def main(argv=None):
       for k in THRESHOLDS:
         row[f'sel_{k:g}'], decisions = rule(views, k)
         row[f'take_{k:g}'] = decisions[0]['take']
-      dec = auto_rounds.decide(1, views[0], views[1], 1.)
-      row.update(val_gain=dec['gain'], se=dec['se'], views=dec['views'],
+      # Each round against the one before (gain and se do not depend on k).
+      steps = [auto_rounds.decide(r, views[r - 1], views[r], 1.)
+               for r in range(1, args.max_round + 1)]
+      row.update(val_gain=steps[0]['gain'], se=steps[0]['se'], views=steps[0]['views'],
                  val_b=views[0], val_r1=views[1])
       fs = folds.get((report.read_json(rundir.config_json_path(d))['backbone'], sc, seed))
       if fs:
@@ -427,11 +429,9 @@ def main(argv=None):
       if args.max_round > 1:
         row['tests'] = tests
         row['val_views'] = views
-        row['later'] = []
-        for r in range(2, args.max_round + 1):
-          dec = auto_rounds.decide(r, views[r - 1], views[r], 1.)
-          row['later'].append({'round': r, 'gain': dec['gain'], 'se': dec['se'],
-                               'test_gain': tests[r] - tests[r - 1]})
+        row['later'] = [{'round': d['round'], 'gain': d['gain'], 'se': d['se'],
+                         'test_gain': tests[d['round']] - tests[d['round'] - 1]}
+                        for d in steps[1:]]
       rows.append(row)
       bar.update(1)
   finally:
